@@ -1,0 +1,102 @@
+"""The fast CPU backend: a small C++/OpenMP kernel compiled once with torch.utils.cpp_extension."""
+from __future__ import annotations
+
+import logging
+import os
+import threading
+from pathlib import Path
+from types import ModuleType
+
+import torch
+
+from .binning import TileBins
+from .projection import Projection, tile_grid
+
+log = logging.getLogger(__name__)
+_SOURCE = Path(__file__).with_name("csrc") / "raster_cpu.cpp"
+_lock = threading.Lock()
+_state: dict[str, object] = {}
+
+
+def build_dir() -> Path:
+    """Where the compiled kernel is cached (per user, per torch version); GT2GS_BUILD_DIR overrides."""
+    base = os.environ.get("GT2GS_BUILD_DIR") or Path.home() / ".cache" / "gt2gs_blender"
+    tag = torch.__version__.replace("+", "_")
+    return Path(base) / f"raster_cpu-torch{tag}"
+
+
+def load_kernel() -> ModuleType | None:
+    """Compile (first time) and import the kernel; None, with the reason logged, if that fails."""
+    with _lock:
+        if "module" not in _state:
+            _state["module"], _state["reason"] = _compile()
+            if _state["module"] is None:
+                log.warning("fast CPU rasterizer unavailable, using the portable torch backend: %s", _state["reason"])
+        return _state["module"]  # type: ignore[return-value]
+
+
+def unavailable_reason() -> str | None:
+    """Why the kernel could not be built, or None when it is available."""
+    load_kernel()
+    return _state.get("reason")  # type: ignore[return-value]
+
+
+def _compile() -> tuple[ModuleType | None, str | None]:
+    from torch.utils import cpp_extension
+
+    directory = build_dir()
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+        module = cpp_extension.load(
+            name="gt2gs_raster_cpu",
+            sources=[str(_SOURCE)],
+            build_directory=str(directory),
+            extra_cflags=["-O3", "-fopenmp", "-ffp-contract=off"],
+            extra_ldflags=["-fopenmp"],
+            verbose=False,
+        )
+    except Exception as exc:  # compiler, ninja or headers missing: fall back, never fail the render
+        return None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else exc}"
+    return module, None
+
+
+def bin_entries(proj: Projection, n_cams: int, width: int, height: int) -> TileBins:
+    """Counting-sort binning in C++ (linear in the number of pairs)."""
+    tiles_x, tiles_y = tile_grid(width, height)
+    order = torch.argsort(proj.depths.detach())
+    offsets, pairs = load_kernel().bin_tiles(
+        proj.tile_bbox, proj.cam_ids.to(torch.int32), order, n_cams, tiles_x, tiles_y
+    )
+    return TileBins(offsets=offsets, pair_gauss=pairs)
+
+
+class _Composite(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, means2d, conics, colors, opacities, bins: TileBins, n_cams: int, width: int, height: int):
+        kernel = load_kernel()
+        args = (means2d.contiguous(), conics.contiguous(), colors.contiguous(), opacities.contiguous())
+        image, final_t, pixel_end = kernel.forward(*args, bins.offsets, bins.pair_gauss, n_cams, width, height)
+        ctx.save_for_backward(*args, bins.offsets, bins.pair_gauss, final_t, pixel_end)
+        ctx.shape = (n_cams, width, height)
+        ctx.mark_non_differentiable(pixel_end)
+        return image, 1.0 - final_t
+
+    @staticmethod
+    def backward(ctx, grad_image, grad_alpha):
+        means2d, conics, colors, opacities, offsets, pairs, final_t, pixel_end = ctx.saved_tensors
+        n_cams, width, height = ctx.shape
+        if grad_image is None:
+            grad_image = torch.zeros(n_cams, height, width, colors.shape[1])
+        if grad_alpha is None:
+            grad_alpha = torch.zeros_like(final_t)
+        g_means, g_conics, g_colors, g_op = load_kernel().backward(
+            means2d, conics, colors, opacities, offsets, pairs, final_t, pixel_end,
+            grad_image.float(), grad_alpha.float(), n_cams, width, height,
+        )
+        return g_means, g_conics, g_colors, g_op, None, None, None, None
+
+
+def composite(proj: Projection, n_cams: int, width: int, height: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """(image (B,H,W,D), alpha (B,H,W)) of the projected entries."""
+    bins = bin_entries(proj, n_cams, width, height)
+    return _Composite.apply(proj.means2d, proj.conics, proj.colors, proj.opacities, bins, n_cams, width, height)
