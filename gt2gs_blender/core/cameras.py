@@ -453,7 +453,9 @@ def _colmap_folder(path: str | os.PathLike) -> tuple[Path, str]:
     return found
 
 
-def _colmap_intrinsics(path: Path, model: str, width: float, height: float, params: Sequence[float]) -> _ColmapIntrinsics:
+def _colmap_intrinsics(
+    path: Path, model: str, width: float, height: float, params: Sequence[float],
+) -> _ColmapIntrinsics:
     """Pinhole intrinsics from a COLMAP camera model's parameters."""
     if model not in _COLMAP_PARAM_COUNTS:
         raise CameraFileError(path, f"camera model {model} is not supported "
