@@ -86,12 +86,12 @@ class _Composite(torch.autograd.Function):
         means2d, conics, colors, opacities, offsets, pairs, final_t, pixel_end = ctx.saved_tensors
         n_cams, width, height = ctx.shape
         if grad_image is None:
-            grad_image = torch.zeros(n_cams, height, width, colors.shape[1])
+            grad_image = colors.new_zeros(n_cams, height, width, colors.shape[1])
         if grad_alpha is None:
             grad_alpha = torch.zeros_like(final_t)
         g_means, g_conics, g_colors, g_op = load_kernel().backward(
             means2d, conics, colors, opacities, offsets, pairs, final_t, pixel_end,
-            grad_image.float(), grad_alpha.float(), n_cams, width, height,
+            grad_image, grad_alpha, n_cams, width, height,
         )
         return g_means, g_conics, g_colors, g_op, None, None, None, None
 

@@ -109,8 +109,11 @@ def project(
     cam_ids, gauss_ids = pairs[:, 0], pairs[:, 1]
     p_cam = p_cam_all[cam_ids, gauss_ids]
     k = ks[cam_ids]
-    jac = _jacobians(p_cam, k, width, height) @ rot[cam_ids]
-    cov2d = jac @ _covariances_3d(quats, scales)[gauss_ids] @ jac.transpose(1, 2)
+    # The covariance chain runs in float64: det = ac - b^2 cancels catastrophically in float32 for
+    # needle-like Gaussians (1000:1 scales), and the extra cost is a few small matrix products.
+    f64 = torch.float64
+    jac = _jacobians(p_cam.to(f64), k.to(f64), width, height) @ rot[cam_ids].to(f64)
+    cov2d = jac @ _covariances_3d(quats.to(f64), scales.to(f64))[gauss_ids] @ jac.transpose(1, 2)
     a = cov2d[:, 0, 0] + EPS2D
     b = cov2d[:, 0, 1]
     c = cov2d[:, 1, 1] + EPS2D
@@ -120,13 +123,13 @@ def project(
     op = opacities[gauss_ids]
     with torch.no_grad():
         r2 = 2.0 * torch.log(255.0 * op.clamp_min(ALPHA_MIN))
-        radii = torch.sqrt(r2[:, None] * torch.stack([a, c], -1)) * (1.0 + 1e-4) + 1e-3
+        radii = (torch.sqrt(r2[:, None] * torch.stack([a, c], -1)) * (1.0 + 1e-4) + 1e-3).to(means.dtype)
         rects = _tile_rects(means2d, radii, width, height)
         keep = (det > 0) & torch.isfinite(det) & (rects[:, 0] <= rects[:, 2]) & (rects[:, 1] <= rects[:, 3])
         keep &= torch.isfinite(means2d).all(-1)
         idx = keep.nonzero().squeeze(1)
     inv_det = 1.0 / det[idx]
-    conics = torch.stack([c[idx] * inv_det, -b[idx] * inv_det, a[idx] * inv_det], -1)
+    conics = torch.stack([c[idx] * inv_det, -b[idx] * inv_det, a[idx] * inv_det], -1).to(means.dtype)
     cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam[idx]
     rgb = _entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
     if with_depth:

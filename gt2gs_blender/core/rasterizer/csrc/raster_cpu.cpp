@@ -18,44 +18,49 @@ namespace {
 constexpr int kTile = 8;
 constexpr int kTilePixels = kTile * kTile;
 constexpr int kMaxChannels = 32;
-constexpr float kAlphaMin = 1.0f / 255.0f;
-constexpr float kAlphaMax = 0.99f;
-constexpr float kTransmittanceMin = 1e-4f;
 
+template <typename T>
+struct Rules {  // the alpha rules in the kernel's precision
+  static constexpr T alpha_max = T(0.99);
+  static constexpr T transmittance_min = T(1e-4);
+};
+
+template <typename T>
 struct Splat {
-  float mx, my, a, b, c, opacity, log_min;  // log_min: power below which alpha < 1/255
+  T mx, my, a, b, c, opacity, log_min;  // log_min: power below which alpha < 1/255
 };
 
 // Power of the Gaussian at a pixel centre; the same expression in forward and backward so that
 // both make the same skip decisions.
-inline float splat_power(const Splat& s, float px, float py, float& dx, float& dy) {
+template <typename T>
+inline T splat_power(const Splat<T>& s, T px, T py, T& dx, T& dy) {
   dx = s.mx - px;
   dy = s.my - py;
-  return -0.5f * (s.a * dx * dx + s.c * dy * dy) - s.b * dx * dy;
+  return T(-0.5) * (s.a * dx * dx + s.c * dy * dy) - s.b * dx * dy;
 }
 
 int num_threads() { return std::max(1, at::get_num_threads()); }
 
 void check_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
                   const torch::Tensor& opacities) {
-  TORCH_CHECK(means2d.dtype() == torch::kFloat32 && means2d.is_contiguous() && means2d.dim() == 2,
-              "means2d must be contiguous float32 (M,2)");
-  TORCH_CHECK(conics.dtype() == torch::kFloat32 && conics.is_contiguous(), "conics must be contiguous float32 (M,3)");
-  TORCH_CHECK(colors.dtype() == torch::kFloat32 && colors.is_contiguous() && colors.dim() == 2,
-              "colors must be contiguous float32 (M,C)");
+  const auto dtype = means2d.dtype();
+  TORCH_CHECK(dtype == torch::kFloat32 || dtype == torch::kFloat64, "inputs must be float32 or float64");
+  for (const auto* t : {&means2d, &conics, &colors, &opacities})
+    TORCH_CHECK(t->dtype() == dtype && t->is_contiguous(), "inputs must be contiguous and of one dtype");
+  TORCH_CHECK(means2d.dim() == 2 && colors.dim() == 2, "means2d must be (M,2) and colors (M,C)");
   TORCH_CHECK(colors.size(1) >= 1 && colors.size(1) <= kMaxChannels, "colors must have 1..32 channels");
-  TORCH_CHECK(opacities.dtype() == torch::kFloat32 && opacities.is_contiguous(), "opacities must be float32 (M,)");
 }
 
 // Gathers the splats of one tile's list into a contiguous local buffer (cache friendly).
-void gather_tile(const float* means2d, const float* conics, const float* opacities, const int32_t* pair_gauss,
-                 int64_t begin, int64_t end, std::vector<Splat>& out) {
+template <typename T>
+void gather_tile(const T* means2d, const T* conics, const T* opacities, const int32_t* pair_gauss,
+                 int64_t begin, int64_t end, std::vector<Splat<T>>& out) {
   out.resize(end - begin);
   for (int64_t k = begin; k < end; ++k) {
     const int32_t g = pair_gauss[k];
-    const float o = opacities[g];
-    out[k - begin] = Splat{means2d[2 * g], means2d[2 * g + 1], conics[3 * g], conics[3 * g + 1], conics[3 * g + 2],
-                           o, -std::log(255.0f * o)};
+    const T o = opacities[g];
+    out[k - begin] = Splat<T>{means2d[2 * g], means2d[2 * g + 1], conics[3 * g], conics[3 * g + 1],
+                              conics[3 * g + 2], o, -std::log(T(255) * o)};
   }
 }
 
@@ -102,65 +107,168 @@ std::vector<torch::Tensor> bin_tiles(torch::Tensor tile_bbox, torch::Tensor cam_
   return {offsets, pairs};
 }
 
+namespace {
+
+template <typename T>
+void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
+                  const torch::Tensor& opacities, const torch::Tensor& tile_offsets, const torch::Tensor& pair_gauss,
+                  int64_t n_cams, int64_t width, int64_t height, torch::Tensor& out_color, torch::Tensor& out_t,
+                  torch::Tensor& out_end) {
+  const int64_t C = colors.size(1);
+  const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
+  const int64_t n_tiles = n_cams * tiles_x * tiles_y;
+  const T* m2 = means2d.data_ptr<T>();
+  const T* cn = conics.data_ptr<T>();
+  const T* col = colors.data_ptr<T>();
+  const T* op = opacities.data_ptr<T>();
+  const int32_t* off = tile_offsets.data_ptr<int32_t>();
+  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
+  T* oc = out_color.data_ptr<T>();
+  T* ot = out_t.data_ptr<T>();
+  int32_t* oe = out_end.data_ptr<int32_t>();
+
+#pragma omp parallel num_threads(num_threads())
+  {
+    std::vector<Splat<T>> splats;
+#pragma omp for schedule(dynamic, 2)
+    for (int64_t tile = 0; tile < n_tiles; ++tile) {
+      const int64_t begin = off[tile], end = off[tile + 1];
+      if (begin == end) continue;
+      const int64_t cam = tile / (tiles_x * tiles_y), local = tile % (tiles_x * tiles_y);
+      const int64_t x0 = (local % tiles_x) * kTile, y0 = (local / tiles_x) * kTile;
+      gather_tile(m2, cn, op, pg, begin, end, splats);
+      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
+        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
+          const T fx = T(px) + T(0.5), fy = T(py) + T(0.5);
+          T acc[kMaxChannels] = {T(0)};
+          T trans = T(1);
+          int64_t last = begin;
+          for (int64_t k = begin; k < end; ++k) {
+            const Splat<T>& s = splats[k - begin];
+            T dx, dy;
+            const T power = splat_power(s, fx, fy, dx, dy);
+            if (power > T(0) || power < s.log_min) continue;
+            const T alpha = std::min(Rules<T>::alpha_max, s.opacity * std::exp(power));
+            const T next_t = trans * (T(1) - alpha);
+            if (next_t < Rules<T>::transmittance_min) break;
+            const T w = alpha * trans;
+            const T* c = col + pg[k] * C;
+            for (int64_t ch = 0; ch < C; ++ch) acc[ch] += w * c[ch];
+            trans = next_t;
+            last = k + 1;
+          }
+          const int64_t pix = (cam * height + py) * width + px;
+          for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[ch];
+          ot[pix] = trans;
+          oe[pix] = static_cast<int32_t>(last);
+        }
+      }
+    }
+  }
+}
+
+template <typename T>
+torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
+                            const torch::Tensor& opacities, const torch::Tensor& tile_offsets,
+                            const torch::Tensor& pair_gauss, const torch::Tensor& final_t,
+                            const torch::Tensor& pixel_end, const torch::Tensor& grad_color,
+                            const torch::Tensor& grad_alpha, int64_t n_cams, int64_t width, int64_t height) {
+  const int64_t M = means2d.size(0), C = colors.size(1);
+  const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
+  const int64_t n_tiles = n_cams * tiles_x * tiles_y;
+  const int64_t stride = 6 + C;  // per-entry gradient record: mx, my, a, b, c, opacity, colours
+  const int n_threads = num_threads();
+  auto buffers = torch::zeros({n_threads, M, stride}, means2d.options());
+  const T* m2 = means2d.data_ptr<T>();
+  const T* cn = conics.data_ptr<T>();
+  const T* col = colors.data_ptr<T>();
+  const T* op = opacities.data_ptr<T>();
+  const int32_t* off = tile_offsets.data_ptr<int32_t>();
+  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
+  const T* ft = final_t.data_ptr<T>();
+  const int32_t* pe = pixel_end.data_ptr<int32_t>();
+  const T* gc = grad_color.data_ptr<T>();
+  const T* ga = grad_alpha.data_ptr<T>();
+  T* buf = buffers.data_ptr<T>();
+
+#pragma omp parallel num_threads(n_threads)
+  {
+    std::vector<Splat<T>> splats;
+    std::vector<T> local;  // per-pair gradient records of the current tile
+    T* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * M * stride;
+#pragma omp for schedule(dynamic, 2)
+    for (int64_t tile = 0; tile < n_tiles; ++tile) {
+      const int64_t begin = off[tile], end = off[tile + 1];
+      if (begin == end) continue;
+      const int64_t cam = tile / (tiles_x * tiles_y), loc = tile % (tiles_x * tiles_y);
+      const int64_t x0 = (loc % tiles_x) * kTile, y0 = (loc / tiles_x) * kTile;
+      gather_tile(m2, cn, op, pg, begin, end, splats);
+      local.assign((end - begin) * stride, T(0));
+      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
+        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
+          const int64_t pix = (cam * height + py) * width + px;
+          const T fx = T(px) + T(0.5), fy = T(py) + T(0.5);
+          const T t_final = ft[pix];
+          const T* g = gc + pix * C;
+          const T g_alpha_out = ga[pix];
+          T behind[kMaxChannels] = {T(0)};  // sum over later contributors of w_j * c_j
+          T trans = t_final;
+          for (int64_t k = pe[pix] - 1; k >= begin; --k) {
+            const Splat<T>& s = splats[k - begin];
+            T dx, dy;
+            const T power = splat_power(s, fx, fy, dx, dy);
+            if (power > T(0) || power < s.log_min) continue;
+            const T gauss = std::exp(power);
+            const T raw_alpha = s.opacity * gauss;
+            const T alpha = std::min(Rules<T>::alpha_max, raw_alpha);
+            const T inv = T(1) / (T(1) - alpha);
+            trans *= inv;  // transmittance in front of this Gaussian
+            const T w = alpha * trans;
+            const T* c = col + pg[k] * C;
+            T* rec = local.data() + (k - begin) * stride;
+            T d_alpha = g_alpha_out * t_final * inv;
+            for (int64_t ch = 0; ch < C; ++ch) {
+              rec[6 + ch] += w * g[ch];
+              d_alpha += g[ch] * (trans * c[ch] - behind[ch] * inv);
+              behind[ch] += w * c[ch];
+            }
+            if (raw_alpha >= Rules<T>::alpha_max) continue;  // clamped: alpha ignores the parameters
+            const T d_power = d_alpha * alpha;
+            rec[0] -= d_power * (s.a * dx + s.b * dy);
+            rec[1] -= d_power * (s.c * dy + s.b * dx);
+            rec[2] -= T(0.5) * d_power * dx * dx;
+            rec[3] -= d_power * dx * dy;
+            rec[4] -= T(0.5) * d_power * dy * dy;
+            rec[5] += d_alpha * gauss;
+          }
+        }
+      }
+      for (int64_t k = begin; k < end; ++k) {
+        T* dst = mine + static_cast<int64_t>(pg[k]) * stride;
+        const T* rec = local.data() + (k - begin) * stride;
+        for (int64_t j = 0; j < stride; ++j) dst[j] += rec[j];
+      }
+    }
+  }
+  return n_threads == 1 ? buffers[0] : buffers.sum(0);
+}
+
+}  // namespace
+
 // Forward compositing. Returns (color (B,H,W,C), transmittance (B,H,W), end index (B,H,W) = one past
 // the last pair each pixel processed, absolute into pair_gauss).
 std::vector<torch::Tensor> forward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor colors,
                                    torch::Tensor opacities, torch::Tensor tile_offsets, torch::Tensor pair_gauss,
                                    int64_t n_cams, int64_t width, int64_t height) {
   check_inputs(means2d, conics, colors, opacities);
-  const int64_t C = colors.size(1);
-  const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
-  const int64_t n_tiles = n_cams * tiles_x * tiles_y;
-  auto out_color = torch::zeros({n_cams, height, width, C}, torch::dtype(torch::kFloat32));
-  auto out_t = torch::ones({n_cams, height, width}, torch::dtype(torch::kFloat32));
+  const auto opts = means2d.options();
+  auto out_color = torch::zeros({n_cams, height, width, colors.size(1)}, opts);
+  auto out_t = torch::ones({n_cams, height, width}, opts);
   auto out_end = torch::zeros({n_cams, height, width}, torch::dtype(torch::kInt32));
-  const float* m2 = means2d.data_ptr<float>();
-  const float* cn = conics.data_ptr<float>();
-  const float* col = colors.data_ptr<float>();
-  const float* op = opacities.data_ptr<float>();
-  const int32_t* off = tile_offsets.data_ptr<int32_t>();
-  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
-  float* oc = out_color.data_ptr<float>();
-  float* ot = out_t.data_ptr<float>();
-  int32_t* oe = out_end.data_ptr<int32_t>();
-
-#pragma omp parallel num_threads(num_threads())
-  {
-    std::vector<Splat> splats;
-#pragma omp for schedule(dynamic, 2)
-    for (int64_t tile = 0; tile < n_tiles; ++tile) {
-      const int64_t begin = off[tile], end = off[tile + 1];
-      const int64_t cam = tile / (tiles_x * tiles_y), local = tile % (tiles_x * tiles_y);
-      const int64_t x0 = (local % tiles_x) * kTile, y0 = (local / tiles_x) * kTile;
-      gather_tile(m2, cn, op, pg, begin, end, splats);
-      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
-        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
-          const float fx = px + 0.5f, fy = py + 0.5f;
-          float acc[kMaxChannels] = {0.0f};
-          float T = 1.0f;
-          int64_t last = begin;
-          for (int64_t k = begin; k < end; ++k) {
-            const Splat& s = splats[k - begin];
-            float dx, dy;
-            const float power = splat_power(s, fx, fy, dx, dy);
-            if (power > 0.0f || power < s.log_min) continue;
-            const float alpha = std::min(kAlphaMax, s.opacity * std::exp(power));
-            const float next_t = T * (1.0f - alpha);
-            if (next_t < kTransmittanceMin) break;
-            const float w = alpha * T;
-            const float* c = col + pg[k] * C;
-            for (int64_t ch = 0; ch < C; ++ch) acc[ch] += w * c[ch];
-            T = next_t;
-            last = k + 1;
-          }
-          const int64_t pix = (cam * height + py) * width + px;
-          for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[ch];
-          ot[pix] = T;
-          oe[pix] = static_cast<int32_t>(last);
-        }
-      }
-    }
-  }
+  AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_forward", [&] {
+    forward_impl<scalar_t>(means2d, conics, colors, opacities, tile_offsets, pair_gauss, n_cams, width, height,
+                           out_color, out_t, out_end);
+  });
   return {out_color, out_t, out_end};
 }
 
@@ -171,86 +279,14 @@ std::vector<torch::Tensor> backward(torch::Tensor means2d, torch::Tensor conics,
                                     torch::Tensor final_t, torch::Tensor pixel_end, torch::Tensor grad_color,
                                     torch::Tensor grad_alpha, int64_t n_cams, int64_t width, int64_t height) {
   check_inputs(means2d, conics, colors, opacities);
-  grad_color = grad_color.contiguous();
-  grad_alpha = grad_alpha.contiguous();
+  grad_color = grad_color.to(means2d.dtype()).contiguous();
+  grad_alpha = grad_alpha.to(means2d.dtype()).contiguous();
+  torch::Tensor total;
+  AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_backward", [&] {
+    total = backward_impl<scalar_t>(means2d, conics, colors, opacities, tile_offsets, pair_gauss, final_t,
+                                    pixel_end, grad_color, grad_alpha, n_cams, width, height);
+  });
   const int64_t M = means2d.size(0), C = colors.size(1);
-  const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
-  const int64_t n_tiles = n_cams * tiles_x * tiles_y;
-  const int64_t stride = 6 + C;  // per-entry gradient record: mx, my, a, b, c, opacity, colours
-  const int n_threads = num_threads();
-  auto buffers = torch::zeros({n_threads, M, stride}, torch::dtype(torch::kFloat32));
-  const float* m2 = means2d.data_ptr<float>();
-  const float* cn = conics.data_ptr<float>();
-  const float* col = colors.data_ptr<float>();
-  const float* op = opacities.data_ptr<float>();
-  const int32_t* off = tile_offsets.data_ptr<int32_t>();
-  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
-  const float* ft = final_t.data_ptr<float>();
-  const int32_t* pe = pixel_end.data_ptr<int32_t>();
-  const float* gc = grad_color.data_ptr<float>();
-  const float* ga = grad_alpha.data_ptr<float>();
-  float* buf = buffers.data_ptr<float>();
-
-#pragma omp parallel num_threads(n_threads)
-  {
-    std::vector<Splat> splats;
-    std::vector<float> local;  // per-pair gradient records of the current tile
-    float* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * M * stride;
-#pragma omp for schedule(dynamic, 2)
-    for (int64_t tile = 0; tile < n_tiles; ++tile) {
-      const int64_t begin = off[tile], end = off[tile + 1];
-      if (begin == end) continue;
-      const int64_t cam = tile / (tiles_x * tiles_y), loc = tile % (tiles_x * tiles_y);
-      const int64_t x0 = (loc % tiles_x) * kTile, y0 = (loc / tiles_x) * kTile;
-      gather_tile(m2, cn, op, pg, begin, end, splats);
-      local.assign((end - begin) * stride, 0.0f);
-      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
-        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
-          const int64_t pix = (cam * height + py) * width + px;
-          const float fx = px + 0.5f, fy = py + 0.5f;
-          const float t_final = ft[pix];
-          const float* g = gc + pix * C;
-          const float g_alpha_out = ga[pix];
-          float behind[kMaxChannels] = {0.0f};  // sum over later contributors of w_j * c_j
-          float T = t_final;
-          for (int64_t k = pe[pix] - 1; k >= begin; --k) {
-            const Splat& s = splats[k - begin];
-            float dx, dy;
-            const float power = splat_power(s, fx, fy, dx, dy);
-            if (power > 0.0f || power < s.log_min) continue;
-            const float gauss = std::exp(power);
-            const float raw_alpha = s.opacity * gauss;
-            const float alpha = std::min(kAlphaMax, raw_alpha);
-            const float inv = 1.0f / (1.0f - alpha);
-            T *= inv;  // transmittance in front of this Gaussian
-            const float w = alpha * T;
-            const float* c = col + pg[k] * C;
-            float* rec = local.data() + (k - begin) * stride;
-            float d_alpha = g_alpha_out * t_final * inv;
-            for (int64_t ch = 0; ch < C; ++ch) {
-              rec[6 + ch] += w * g[ch];
-              d_alpha += g[ch] * (T * c[ch] - behind[ch] * inv);
-              behind[ch] += w * c[ch];
-            }
-            if (raw_alpha >= kAlphaMax) continue;  // clamped: alpha does not depend on the parameters
-            const float d_power = d_alpha * alpha;
-            rec[0] += -d_power * (s.a * dx + s.b * dy);
-            rec[1] += -d_power * (s.c * dy + s.b * dx);
-            rec[2] += -0.5f * d_power * dx * dx;
-            rec[3] += -d_power * dx * dy;
-            rec[4] += -0.5f * d_power * dy * dy;
-            rec[5] += d_alpha * gauss;
-          }
-        }
-      }
-      for (int64_t k = begin; k < end; ++k) {
-        float* dst = mine + static_cast<int64_t>(pg[k]) * stride;
-        const float* rec = local.data() + (k - begin) * stride;
-        for (int64_t j = 0; j < stride; ++j) dst[j] += rec[j];
-      }
-    }
-  }
-  auto total = n_threads == 1 ? buffers[0] : buffers.sum(0);
   return {total.narrow(1, 0, 2).contiguous(), total.narrow(1, 2, 3).contiguous(), total.narrow(1, 6, C).contiguous(),
           total.narrow(1, 5, 1).reshape({M}).contiguous()};
 }

@@ -1,0 +1,209 @@
+"""Every rasterizer backend against the float64 dense reference, finite differences and analytic cases."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from gt2gs_blender.core.rasterizer import available_backends, rasterization
+from gt2gs_blender.core.scene import quats_to_rotmats
+
+from .reference import render_reference, support_radius
+
+BACKENDS = [b for b in available_backends("cpu")]
+
+
+def look_camera(yaw: float, pitch: float, dist: float, width: int, height: int, focal: float):
+    """A camera at distance ``dist`` from the origin looking at it (OpenCV frame): viewmat, K."""
+    fwd = np.array([math.sin(yaw) * math.cos(pitch), math.sin(pitch), math.cos(yaw) * math.cos(pitch)])
+    center = -dist * fwd
+    right = np.cross([0.0, -1.0, 0.0], fwd)
+    right /= np.linalg.norm(right)
+    down = np.cross(fwd, right)
+    rot = np.stack([right, down, fwd])
+    viewmat = np.eye(4)
+    viewmat[:3, :3] = rot
+    viewmat[:3, 3] = -rot @ center
+    k = np.array([[focal, 0, width / 2.0], [0, focal * 1.05, height / 2.0], [0, 0, 1]])
+    return torch.tensor(viewmat, dtype=torch.float32), torch.tensor(k, dtype=torch.float32)
+
+
+def random_gaussians(n: int, sh_degree: int | None, *, spread=1.0, log_scale=-3.0, aniso=1.0, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    means = (torch.rand(n, 3, generator=g) * 2 - 1) * spread
+    quats = torch.randn(n, 4, generator=g)
+    scales = torch.exp(log_scale + 0.6 * torch.randn(n, 3, generator=g) + aniso * torch.rand(n, 3, generator=g))
+    opacities = torch.rand(n, generator=g) * 0.98 + 0.02
+    opacities[: n // 10] = 1.0  # exercise the 0.99 clamp
+    if sh_degree is None:
+        colors = torch.rand(n, 3, generator=g)
+    else:
+        colors = torch.randn(n, (sh_degree + 1) ** 2, 3, generator=g) * 0.4
+    return means, quats, scales, opacities, colors
+
+
+def two_cameras(width=61, height=47):
+    v1, k1 = look_camera(0.2, 0.1, 3.0, width, height, 60.0)
+    v2, k2 = look_camera(-0.7, -0.3, 2.5, width, height, 45.0)
+    return torch.stack([v1, v2]), torch.stack([k1, k2])
+
+
+def compare_to_reference(gaussians, viewmats, ks, width, height, backend, sh_degree, tol=1e-4):
+    out = rasterization(*gaussians, viewmats, ks, width, height, sh_degree=sh_degree, backend=backend)
+    assert out.backend == backend
+    for b in range(viewmats.shape[0]):
+        ref = render_reference(*(t.numpy() for t in gaussians), viewmats[b].numpy(), ks[b].numpy(), width, height,
+                               sh_degree=sh_degree)
+        ok = ~ref.ambiguous
+        assert ok.mean() > 0.97, "too many threshold-ambiguous pixels for a meaningful comparison"
+        color = out.colors[b].double().numpy()
+        assert np.abs(color - ref.color)[ok].max() <= tol
+        assert np.abs(out.alphas[b].double().numpy() - ref.alpha)[ok].max() <= tol
+        depth_scale = max(1.0, float((ref.depth / np.maximum(ref.alpha, 1e-3)).max()))  # colour tol per unit z
+        assert np.abs(out.depths[b].double().numpy() - ref.depth)[ok].max() <= tol * depth_scale
+    return out
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("sh_degree", [None, 0, 1, 2, 3])
+def test_matches_reference_random_scenes(backend, sh_degree):
+    gaussians = random_gaussians(300, sh_degree, seed=sh_degree or 7)
+    viewmats, ks = two_cameras()
+    out = compare_to_reference(gaussians, viewmats, ks, 61, 47, backend, sh_degree)
+    assert out.alphas.max() > 0.5  # the scene is really visible
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_matches_reference_extreme_gaussians(backend):
+    """Tiny, huge and 1000:1 anisotropic Gaussians, and ones near, on and behind the near plane."""
+    viewmats, ks = two_cameras(40, 32)
+    means, quats, scales, opacities, colors = random_gaussians(60, None, seed=3)
+    scales[0:10] = 1e-5                                   # far below a pixel: the dilation dominates
+    scales[10:14] = 3.0                                   # larger than the view
+    scales[14:24, 0] = scales[14:24, 1] * 1000.0          # needles
+    cam_center = -viewmats[0, :3, :3].T @ viewmats[0, :3, 3]
+    fwd = viewmats[0, 2, :3]
+    for i, z in enumerate([0.02, 0.0102, 0.0098, -0.5, 0.3]):  # near plane is 0.01
+        means[24 + i] = cam_center + z * fwd
+        scales[24 + i] = 0.01
+    compare_to_reference((means, quats, scales, opacities, colors), viewmats, ks, 40, 32, backend, None)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_single_gaussian_footprint_is_analytic(backend):
+    """An isotropic Gaussian facing the camera: alpha = o * exp(-r^2 / (2 s^2)) with s^2 = (f s3 / z)^2 + 0.3,
+    exactly zero beyond the radius where alpha = 1/255."""
+    width = height = 48
+    focal, z, s3, o = 40.0, 2.0, 0.1, 0.8
+    viewmat = torch.eye(4)[None]
+    k = torch.tensor([[[focal, 0, 24.0], [0, focal, 24.0], [0, 0, 1]]])
+    means = torch.tensor([[0.0, 0.0, z]])
+    out = rasterization(means, torch.tensor([[1.0, 0, 0, 0]]), torch.full((1, 3), s3), torch.tensor([o]),
+                        torch.ones(1, 3), viewmat, k, width, height, backend=backend)
+    sigma2 = (focal * s3 / z) ** 2 + 0.3
+    ys, xs = np.mgrid[0:height, 0:width] + 0.5
+    r2 = (xs - 24.0) ** 2 + (ys - 24.0) ** 2
+    expected = np.minimum(0.99, o * np.exp(-r2 / (2 * sigma2)))
+    expected[expected < 1 / 255] = 0.0
+    alpha = out.alphas[0].numpy()
+    assert np.abs(alpha - expected).max() < 1e-5
+    assert np.abs(out.depths[0].numpy() - z * expected).max() < 1e-5
+    r = support_radius(o, math.sqrt(sigma2))
+    assert (alpha[r2 > (r + 0.01) ** 2] == 0).all() and (alpha[r2 < (r - 0.01) ** 2] > 0).all()
+
+
+def tiny_scene_f64(sh_degree):
+    g = torch.Generator().manual_seed(11)
+    n = 5
+    means = torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.6 - 0.3
+    quats = torch.randn(n, 4, generator=g, dtype=torch.float64)
+    scales = torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.1 + 0.05
+    opacities = torch.rand(n, generator=g, dtype=torch.float64) * 0.5 + 0.3
+    k = 1 if sh_degree is None else (sh_degree + 1) ** 2
+    colors = torch.rand(n, 3, generator=g, dtype=torch.float64) if sh_degree is None else \
+        torch.randn(n, k, 3, generator=g, dtype=torch.float64) * 0.3
+    viewmats, ks = two_cameras(14, 12)
+    ks = ks.double()
+    ks[:, :2] *= 0.35
+    return [means, quats, scales, opacities, colors], viewmats.double(), ks
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("sh_degree", [None, 2])
+def test_gradcheck_all_gaussian_parameters(backend, sh_degree):
+    params, viewmats, ks = tiny_scene_f64(sh_degree)
+    weights = torch.rand(2, 12, 14, 5, dtype=torch.float64)
+
+    def f(*p):
+        out = rasterization(*p, viewmats, ks, 14, 12, sh_degree=sh_degree, backend=backend)
+        return (out.colors * weights[..., :3]).sum() + (out.depths * weights[..., 3]).sum() \
+            + (out.alphas * weights[..., 4]).sum()
+
+    inputs = [p.clone().requires_grad_(True) for p in params]
+    assert torch.autograd.gradcheck(f, inputs, eps=1e-6, atol=1e-5, rtol=1e-4)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_float32_gradients_match_float64(backend):
+    """Gradient relative error of the float32 path against the float64 one (gradchecked above) <= 1e-3."""
+    gaussians = random_gaussians(400, 3, seed=5)
+    viewmats, ks = two_cameras(64, 48)
+    weights = torch.rand(2, 48, 64, 3, dtype=torch.float64)
+    grads = {}
+    for dtype in (torch.float32, torch.float64):
+        inputs = [t.detach().to(dtype).requires_grad_(True) for t in gaussians]
+        out = rasterization(*inputs, viewmats.to(dtype), ks.to(dtype), 64, 48, sh_degree=3, backend=backend)
+        ((out.colors * weights.to(dtype)).sum() + 0.1 * out.depths.sum()).backward()
+        grads[dtype] = [t.grad.double() for t in inputs]
+    for g32, g64 in zip(grads[torch.float32], grads[torch.float64]):
+        assert (g32 - g64).norm() <= 1e-3 * g64.norm()
+
+
+def test_backends_agree_with_each_other():
+    if len(BACKENDS) < 2:
+        pytest.skip(f"only {BACKENDS} available here")
+    gaussians = random_gaussians(2000, 3, seed=9, spread=1.5)
+    viewmats, ks = two_cameras(96, 80)
+    outs = []
+    for backend in BACKENDS:
+        inputs = [t.clone().requires_grad_(True) for t in gaussians]
+        out = rasterization(*inputs, viewmats, ks, 96, 80, sh_degree=3, backend=backend)
+        (out.colors.square().sum() + out.alphas.sum()).backward()
+        outs.append((out.colors.detach(), [t.grad for t in inputs]))
+    (c0, g0), (c1, g1) = outs
+    assert (c0 - c1).abs().max() < 1e-5
+    for a, b in zip(g0, g1):
+        assert (a - b).norm() <= 1e-4 * b.norm()
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_background_and_empty_views(backend):
+    gaussians = random_gaussians(50, None, seed=2)
+    means = gaussians[0] + torch.tensor([0.0, 0.0, -100.0])  # everything behind the camera
+    viewmats, ks = two_cameras(16, 16)
+    inputs = [means.requires_grad_(True)] + [t.clone().requires_grad_(True) for t in gaussians[1:]]
+    bg = torch.tensor([0.2, 0.4, 0.6])
+    out = rasterization(*inputs, viewmats, ks, 16, 16, backgrounds=bg, backend=backend)
+    assert torch.equal(out.alphas, torch.zeros(2, 16, 16))
+    assert torch.allclose(out.colors, bg.expand(2, 16, 16, 3))
+    out.colors.sum().backward()
+    assert all(torch.count_nonzero(t.grad) == 0 for t in inputs)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_background_composites_over_transparency(backend):
+    gaussians = random_gaussians(200, None, seed=4)
+    viewmats, ks = two_cameras(32, 24)
+    plain = rasterization(*gaussians, viewmats, ks, 32, 24, backend=backend)
+    bg = torch.tensor([[1.0, 0.0, 0.5], [0.0, 1.0, 0.25]])
+    over = rasterization(*gaussians, viewmats, ks, 32, 24, backgrounds=bg, backend=backend)
+    expected = plain.colors + (1 - plain.alphas[..., None]) * bg[:, None, None, :]
+    assert torch.allclose(over.colors, expected, atol=1e-6)
+
+
+def test_quaternion_convention_is_w_first():
+    """A 90-degree turn about z (w, x, y, z) = (cos 45, 0, 0, sin 45) maps x to y."""
+    q = torch.tensor([[math.cos(math.pi / 4), 0.0, 0.0, math.sin(math.pi / 4)]])
+    assert torch.allclose(quats_to_rotmats(q)[0] @ torch.tensor([1.0, 0, 0]), torch.tensor([0.0, 1, 0]), atol=1e-6)
