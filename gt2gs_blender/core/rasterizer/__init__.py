@@ -93,12 +93,13 @@ def rasterization(
         )
         proj = None
     else:
-        proj = project(
+        backend_module = cpu_backend if name == "cpu" else torch_backend
+        projector = cpu_backend.project if name == "cpu" else project
+        proj = projector(
             means, quats, scales, opacities, colors, viewmats, ks, width, height, sh_degree=sh_degree,
             near_plane=near_plane, far_plane=far_plane, with_depth=render_depth,
         )
-        compositor = cpu_backend.composite if name == "cpu" else torch_backend.composite
-        image, alpha = compositor(proj, n_cams, width, height)
+        image, alpha = backend_module.composite(proj, n_cams, width, height)
     rgb, depth = (image[..., :-1], image[..., -1]) if render_depth else (image, None)
     if backgrounds is not None:
         bg = backgrounds.reshape(-1, 1, 1, rgb.shape[-1]) if backgrounds.dim() == 2 else backgrounds

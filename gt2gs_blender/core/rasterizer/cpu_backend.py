@@ -10,10 +10,10 @@ from types import ModuleType
 import torch
 
 from .binning import TileBins
-from .projection import Projection, tile_grid
+from .projection import Projection, tile_grid, with_depth_channel
 
 log = logging.getLogger(__name__)
-_SOURCE = Path(__file__).with_name("csrc") / "raster_cpu.cpp"
+_SOURCES = [Path(__file__).with_name("csrc") / name for name in ("raster_cpu.cpp", "project_cpu.cpp")]
 _lock = threading.Lock()
 _state: dict[str, object] = {}
 
@@ -49,7 +49,7 @@ def _compile() -> tuple[ModuleType | None, str | None]:
         directory.mkdir(parents=True, exist_ok=True)
         module = cpp_extension.load(
             name="gt2gs_raster_cpu",
-            sources=[str(_SOURCE)],
+            sources=[str(p) for p in _SOURCES],
             build_directory=str(directory),
             extra_cflags=["-O3", "-fopenmp", "-ffp-contract=off"],
             extra_ldflags=["-fopenmp"],
@@ -100,3 +100,57 @@ def composite(proj: Projection, n_cams: int, width: int, height: int) -> tuple[t
     """(image (B,H,W,D), alpha (B,H,W)) of the projected entries."""
     bins = bin_entries(proj, n_cams, width, height)
     return _Composite.apply(proj.means2d, proj.conics, proj.colors, proj.opacities, bins, n_cams, width, height)
+
+
+class _Project(torch.autograd.Function):
+    """Dense C++ projection, compacted to the visible entries; gradients flow to the Gaussians."""
+
+    @staticmethod
+    def forward(ctx, means, quats, scales, opacities, sh, viewmats, ks, width, height, near, far, sh_degree):
+        kernel = load_kernel()
+        sh_in = sh if sh_degree >= 0 else means.new_zeros(0)
+        means2d, conics, rgb, depth, radii, rects, valid = kernel.project_forward(
+            means.detach(), quats.detach(), scales.detach(), opacities.detach(), sh_in.detach(), viewmats, ks,
+            width, height, near, far, sh_degree,
+        )
+        cam_ids, gauss_ids = valid.nonzero(as_tuple=True)
+        ctx.save_for_backward(means, quats, scales, sh_in, viewmats, ks, cam_ids, gauss_ids)
+        ctx.config = (width, height, sh_degree)
+        ctx.mark_non_differentiable(cam_ids, gauss_ids, radii, rects)
+        return (means2d[cam_ids, gauss_ids], conics[cam_ids, gauss_ids], rgb[cam_ids, gauss_ids],
+                depth[cam_ids, gauss_ids], cam_ids, gauss_ids, radii[cam_ids, gauss_ids], rects[cam_ids, gauss_ids])
+
+    @staticmethod
+    def backward(ctx, g_means2d, g_conics, g_rgb, g_depth, *_):
+        means, quats, scales, sh_in, viewmats, ks, cam_ids, gauss_ids = ctx.saved_tensors
+        width, height, sh_degree = ctx.config
+        m = cam_ids.shape[0]
+        zeros = {"m2": (m, 2), "con": (m, 3), "rgb": (m, 3 if sh_degree >= 0 else 0), "d": (m,)}
+        g_means2d = means.new_zeros(zeros["m2"]) if g_means2d is None else g_means2d
+        g_conics = means.new_zeros(zeros["con"]) if g_conics is None else g_conics
+        g_rgb = means.new_zeros(zeros["rgb"]) if g_rgb is None else g_rgb
+        g_depth = means.new_zeros(zeros["d"]) if g_depth is None else g_depth
+        gm, gq, gs, gsh = load_kernel().project_backward(
+            means.detach(), quats.detach(), scales.detach(), sh_in.detach(), viewmats, ks, width, height, sh_degree,
+            cam_ids, gauss_ids, g_means2d, g_conics, g_rgb, g_depth,
+        )
+        return gm, gq, gs, None, gsh if sh_degree >= 0 else None, None, None, None, None, None, None, None
+
+
+def project(
+    means, quats, scales, opacities, colors, viewmats, ks, width, height, *, sh_degree, near_plane, far_plane,
+    with_depth,
+) -> Projection:
+    """The C++ twin of projection.project (same entries, same rules)."""
+    degree = -1 if sh_degree is None else sh_degree
+    means2d, conics, rgb, depth, cam_ids, gauss_ids, radii, rects = _Project.apply(
+        means, quats, scales, opacities, colors, viewmats.detach(), ks.detach(), width, height,
+        near_plane, far_plane, degree,
+    )
+    if sh_degree is None:
+        rgb = colors[gauss_ids]
+    return Projection(
+        cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d, conics=conics, depths=depth,
+        opacities=opacities[gauss_ids], colors=with_depth_channel(rgb, depth, with_depth), tile_bbox=rects,
+        radii=radii,
+    )

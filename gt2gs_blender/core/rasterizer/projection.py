@@ -132,12 +132,16 @@ def project(
     conics = torch.stack([c[idx] * inv_det, -b[idx] * inv_det, a[idx] * inv_det], -1).to(means.dtype)
     cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam[idx]
     rgb = _entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
-    if with_depth:
-        rgb = torch.cat([rgb, p_cam[:, 2:3]], dim=-1)
     return Projection(
         cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d[idx], conics=conics, depths=p_cam[:, 2],
-        opacities=op[idx], colors=rgb, tile_bbox=rects[idx].contiguous(), radii=radii[idx],
+        opacities=op[idx], colors=with_depth_channel(rgb, p_cam[:, 2], with_depth), tile_bbox=rects[idx].contiguous(),
+        radii=radii[idx],
     )
+
+
+def with_depth_channel(rgb: torch.Tensor, depth: torch.Tensor, with_depth: bool) -> torch.Tensor:
+    """Append camera-space depth as the last channel, so compositing yields sum T*alpha*z (paper Eq. 2)."""
+    return torch.cat([rgb, depth[:, None]], dim=-1) if with_depth else rgb
 
 
 def _entry_colors(

@@ -48,5 +48,5 @@ def eval_sh(coeffs: torch.Tensor, dirs: torch.Tensor, degree: int) -> torch.Tens
         return sh0_to_rgb(coeffs[..., 0, :])
     n = (degree + 1) ** 2
     basis = sh_basis(dirs, degree)
-    rgb = (basis[..., :, None] * coeffs[..., :n, :]).sum(dim=-2)
+    rgb = torch.einsum("...k,...kc->...c", basis, coeffs[..., :n, :])
     return (rgb + 0.5).clamp_min(0.0)

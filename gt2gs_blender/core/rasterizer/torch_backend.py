@@ -2,8 +2,8 @@
 
 Each step takes the next ``CHUNK`` entries of every still-active tile's list and composites them
 for the tile's 64 pixels with cumulative products. The backward recomputes the same chunks front
-to back (the colour behind an entry is the final colour minus the running prefix), so memory stays
-bounded by one chunk instead of growing with the number of (entry, pixel) pairs.
+to back (the colour behind an entry is the final colour minus the running prefix, both dotted with the
+pixel's colour gradient so only scalars per pixel are kept), so memory stays bounded by one chunk instead of growing with the number of (entry, pixel) pairs.
 """
 from __future__ import annotations
 
@@ -125,36 +125,41 @@ class _Composite(torch.autograd.Function):
         if g_a is None:
             g_a = torch.zeros_like(t_final)
         grads = torch.zeros(means2d.shape[0], 6 + colors.shape[1], dtype=means2d.dtype, device=means2d.device)
-        prefix = torch.zeros_like(acc_final)
+        g_total = (g_img * acc_final).sum(-1)      # g . C_final per pixel
+        g_prefix = torch.zeros_like(t_final)       # g . (colour composited so far) per pixel
         t_run = torch.ones_like(t_final)
         done = torch.zeros_like(t_final, dtype=torch.bool)
 
         def step(rows, j):
             ch = _chunk(means2d, conics, opacities, pairs.long(), tiles, rows, j, t_run[rows], done[rows])
-            g, cols = g_img[rows], colors[ch.entries]
+            g = g_img[rows]
+            gc = torch.einsum("apc,akc->akp", g, colors[ch.entries])          # g . c_i per pixel
             w = ch.alpha * ch.t_before
-            contrib = w[..., None] * cols[:, :, None, :]                       # (A, K, 64, D)
-            behind = acc_final[rows][:, None] - (prefix[rows][:, None] + torch.cumsum(contrib, dim=1))
+            wgc = w * gc
+            behind = g_total[rows][:, None] - g_prefix[rows][:, None] - torch.cumsum(wgc, dim=1)
             inv = 1.0 / (1.0 - ch.alpha)
-            d_alpha = ((ch.t_before[..., None] * cols[:, :, None, :] - behind * inv[..., None]) * g[:, None]).sum(-1)
-            d_alpha = d_alpha + g_a[rows][:, None, :] * t_final[rows][:, None, :] * inv
+            d_alpha = ch.t_before * gc - behind * inv + g_a[rows][:, None, :] * t_final[rows][:, None, :] * inv
             d_alpha = torch.where((ch.alpha > 0) & (ch.raw < ALPHA_MAX), d_alpha, 0.0)
             d_power = d_alpha * ch.alpha
+            gx, gy = d_power * ch.dx, d_power * ch.dy
+            sx, sy = gx.sum(-1), gy.sum(-1)
             q = conics[ch.entries]
             rec = torch.cat(
                 [
-                    (-d_power * (q[..., 0:1] * ch.dx + q[..., 1:2] * ch.dy)).sum(-1, keepdim=True),
-                    (-d_power * (q[..., 2:3] * ch.dy + q[..., 1:2] * ch.dx)).sum(-1, keepdim=True),
-                    (-0.5 * d_power * ch.dx * ch.dx).sum(-1, keepdim=True),
-                    (-d_power * ch.dx * ch.dy).sum(-1, keepdim=True),
-                    (-0.5 * d_power * ch.dy * ch.dy).sum(-1, keepdim=True),
-                    (d_alpha * ch.gauss).sum(-1, keepdim=True),
+                    torch.stack([
+                        -(q[..., 0] * sx + q[..., 1] * sy),
+                        -(q[..., 2] * sy + q[..., 1] * sx),
+                        -0.5 * (gx * ch.dx).sum(-1),
+                        -(gx * ch.dy).sum(-1),
+                        -0.5 * (gy * ch.dy).sum(-1),
+                        (d_alpha * ch.gauss).sum(-1),
+                    ], dim=-1),
                     torch.einsum("akp,apc->akc", w, g),
                 ],
                 dim=-1,
             )
             grads.index_add_(0, ch.entries.reshape(-1), rec.reshape(-1, rec.shape[-1]))
-            prefix[rows] += contrib.sum(dim=1)
+            g_prefix[rows] += wgc.sum(dim=1)
             t_run[rows] = ch.t_after
             done[rows] |= ch.stop
             return done[rows].all(dim=1)

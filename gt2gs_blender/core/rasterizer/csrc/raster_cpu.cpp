@@ -291,7 +291,20 @@ std::vector<torch::Tensor> backward(torch::Tensor means2d, torch::Tensor conics,
           total.narrow(1, 5, 1).reshape({M}).contiguous()};
 }
 
+// Defined in project_cpu.cpp.
+std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                           torch::Tensor opacities, torch::Tensor sh, torch::Tensor viewmats,
+                                           torch::Tensor ks, int64_t width, int64_t height, double near, double far,
+                                           int64_t sh_degree);
+std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
+                                            torch::Tensor sh, torch::Tensor viewmats, torch::Tensor ks,
+                                            int64_t width, int64_t height, int64_t sh_degree, torch::Tensor cam_ids,
+                                            torch::Tensor gauss_ids, torch::Tensor g_means2d, torch::Tensor g_conics,
+                                            torch::Tensor g_rgb, torch::Tensor g_depth);
+
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
+  m.def("project_forward", &project_forward, "Project Gaussians into cameras");
+  m.def("project_backward", &project_backward, "Gradients of project_forward()");
   m.def("bin_tiles", &bin_tiles, "Sort Gaussian/tile pairs by tile, front to back");
   m.def("forward", &forward, "Composite Gaussians over 8x8 tiles");
   m.def("backward", &backward, "Gradients of forward()");

@@ -1,0 +1,152 @@
+"""Rasterizer benchmark: every available backend over scene sizes and resolutions, time beside error.
+
+Each configuration runs in its own subprocess so its peak memory (RSS growth over the inputs) is its
+own. Prints a table and writes a JSON list of records
+{backend, n, width, height, fwd_ms, fwd_bwd_ms, peak_mib, max_abs_err} (null where not measured).
+Error is the max |colour| difference to the float64 dense reference (tests/reference.py) over
+pixels where no alpha rule sits on its threshold; it is measured where the reference fits.
+
+    python bench/raster.py --quick            # 10k@256, 50k@512, 200k@512, a few minutes
+    python bench/raster.py --json out.json    # the full grid
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+FULL_N = [10_000, 50_000, 200_000, 1_000_000]
+FULL_RES = [256, 512, 1024]
+QUICK = [(10_000, 256), (50_000, 512), (200_000, 512)]
+REFERENCE_MAX_WORK = 10_000 * 256 * 256  # Gaussians x pixels the float64 reference can afford here
+SLOW_BACKEND_LIMIT_S = 30.0              # beyond this fwd+bwd, larger configs of a backend are skipped
+
+
+def make_scene(n: int, res: int, seed: int = 0):
+    """Random SH3 Gaussians filling a 60-degree view at 2-6 units; a few pixels wide at 512 px."""
+    import torch
+
+    g = torch.Generator().manual_seed(seed)
+    means = torch.randn(n, 3, generator=g) * torch.tensor([0.8, 0.8, 0.7])
+    means[:, 2] += 4.0
+    quats = torch.randn(n, 4, generator=g)
+    scales = torch.exp(torch.randn(n, 3, generator=g) * 0.5 - 4.0)
+    opacities = torch.rand(n, generator=g) * 0.9 + 0.05
+    sh = torch.randn(n, 16, 3, generator=g) * 0.3
+    focal = res / (2 * 0.577)
+    viewmats = torch.eye(4)[None]
+    ks = torch.tensor([[[focal, 0, res / 2], [0, focal, res / 2], [0, 0, 1.0]]])
+    return [means, quats, scales, opacities, sh], viewmats, ks
+
+
+def rss_mib() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * resource.getpagesize() / 2**20
+
+
+def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
+    """Measure one configuration in this process (called in a subprocess)."""
+    import torch
+
+    from gt2gs_blender.core.rasterizer import rasterization
+
+    params, viewmats, ks = make_scene(n, res)
+    params = [p.requires_grad_(True) for p in params]
+    warm = rasterization(*params, viewmats, ks, res, res, sh_degree=3, backend=backend)
+    assert warm.backend == backend, f"{backend} fell back to {warm.backend}"
+    del warm
+    base = rss_mib()
+    fwd, total = [], []
+    for _ in range(repeats):
+        for p in params:
+            p.grad = None
+        t0 = time.perf_counter()
+        out = rasterization(*params, viewmats, ks, res, res, sh_degree=3, backend=backend)
+        t1 = time.perf_counter()
+        (out.colors.sum() + out.depths.sum() * 0.1 + out.alphas.sum()).backward()
+        t2 = time.perf_counter()
+        fwd.append(t1 - t0)
+        total.append(t2 - t0)
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - base
+    err = None
+    if n * res * res <= REFERENCE_MAX_WORK:
+        from tests.reference import render_reference
+
+        ref = render_reference(*(p.detach().numpy() for p in params), viewmats[0].numpy(), ks[0].numpy(), res, res,
+                               sh_degree=3)
+        diff = (out.colors[0].detach().double().numpy() - ref.color)[~ref.ambiguous]
+        err = float(abs(diff).max())
+    return {
+        "backend": backend, "n": n, "width": res, "height": res,
+        "fwd_ms": 1000 * statistics.median(fwd), "fwd_bwd_ms": 1000 * statistics.median(total),
+        "peak_mib": max(0.0, peak), "max_abs_err": err,
+    }
+
+
+def measure(backend: str, n: int, res: int, repeats: int) -> dict:
+    """Run one configuration in a fresh subprocess and parse its JSON line."""
+    cmd = [sys.executable, __file__, "--one", backend, str(n), str(res), "--repeats", str(repeats)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
+    if proc.returncode != 0:
+        print(f"  {backend} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
+        return {"backend": backend, "n": n, "width": res, "height": res, "fwd_ms": None, "fwd_bwd_ms": None,
+                "peak_mib": None, "max_abs_err": None}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def fmt(v, spec: str) -> str:
+    return "—" if v is None else format(v, spec)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="10k@256, 50k@512 and 200k@512 only")
+    parser.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "raster.json")
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--backends", default=None, help="comma-separated subset of the available backends")
+    parser.add_argument("--one", nargs=3, metavar=("BACKEND", "N", "RES"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.one:
+        print(json.dumps(run_one(args.one[0], int(args.one[1]), int(args.one[2]), args.repeats)))
+        return 0
+
+    import torch
+
+    from gt2gs_blender.core.rasterizer import available_backends
+
+    backends = available_backends("cuda" if torch.cuda.is_available() else "cpu")
+    if torch.cuda.is_available():
+        backends += [b for b in available_backends("cpu") if b not in backends]
+    if args.backends:
+        backends = [b for b in args.backends.split(",") if b in backends]
+    configs = QUICK if args.quick else [(n, r) for n in FULL_N for r in FULL_RES]
+    records, too_slow = [], {}
+    print(f"{'backend':8} {'N':>9} {'res':>6} {'fwd ms':>9} {'fwd+bwd ms':>11} {'peak MiB':>9} {'max err':>9}")
+    for n, res in configs:
+        for backend in backends:
+            if too_slow.get(backend, float("inf")) <= n * res * res:
+                rec = {"backend": backend, "n": n, "width": res, "height": res, "fwd_ms": None, "fwd_bwd_ms": None,
+                       "peak_mib": None, "max_abs_err": None}
+            else:
+                rec = measure(backend, n, res, args.repeats)
+                if rec["fwd_bwd_ms"] is None or rec["fwd_bwd_ms"] > 1000 * SLOW_BACKEND_LIMIT_S:
+                    too_slow[backend] = min(too_slow.get(backend, float("inf")), n * res * res + 1)
+            records.append(rec)
+            print(f"{backend:8} {n:>9,} {res:>4}² {fmt(rec['fwd_ms'], '9.1f')} {fmt(rec['fwd_bwd_ms'], '11.1f')} "
+                  f"{fmt(rec['peak_mib'], '9.0f')} {fmt(rec['max_abs_err'], '9.1e')}", flush=True)
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps(records, indent=1))
+    print(f"wrote {args.json}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
