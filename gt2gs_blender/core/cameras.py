@@ -12,7 +12,6 @@ import json
 import math
 import os
 import struct
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
+from .atomic import atomic_write
 from .errors import CameraFileError
 from .scene import GaussianScene
 
@@ -284,22 +284,11 @@ def save_cameras_json(path: str | os.PathLike, cameras: Sequence[Camera]) -> Non
 
 
 def _write_atomically(path: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to a temp file beside ``path`` then rename it over ``path``."""
-    directory = os.path.dirname(os.path.abspath(path))
+    """Write ``text`` atomically, reporting OS failures as a CameraFileError naming the file."""
     try:
-        fd, tmp = tempfile.mkstemp(prefix=".cameras-", suffix=".tmp", dir=directory)
+        atomic_write(path, text)
     except OSError as exc:
         raise CameraFileError(path, f"cannot write: {exc}") from exc
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.chmod(tmp, 0o644)  # mkstemp makes it private; a cameras file is an ordinary shared file
-        os.replace(tmp, path)
-    except BaseException as exc:
-        os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise CameraFileError(path, f"cannot write: {exc}") from exc
-        raise
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -22,7 +22,6 @@ from __future__ import annotations
 import io
 import os
 import re
-import secrets
 import struct
 import warnings
 from dataclasses import dataclass
@@ -32,6 +31,7 @@ from typing import BinaryIO, Iterable
 import numpy as np
 import torch
 
+from .atomic import atomic_write
 from .errors import PlyFormatError
 from .scene import GaussianScene, sh_coeff_count
 
@@ -492,7 +492,7 @@ def write_ply(path: PathLike, scene: GaussianScene, *, fmt: str = "binary_little
          *(f"property {t} {name}\n" for name, t in layout), "end_header\n"]
     ).encode("ascii")
     body = _ascii_body(records, layout) if fmt == "ascii" else records.view(np.uint8)
-    _atomic_write(Path(path), (header, body))
+    atomic_write(Path(path), (header, body))
 
 
 def _write_layout(scene: GaussianScene) -> tuple[tuple[str, str], ...]:
@@ -566,17 +566,3 @@ def _ascii_body(records: np.ndarray, layout: tuple[tuple[str, str], ...]) -> byt
     row = " ".join(_ASCII_FORMAT.get(SCALAR_TYPES[t], "%d") for _, t in layout)
     lines = [row % values for values in records.tolist()]
     return ("\n".join(lines) + "\n" if lines else "").encode("ascii")
-
-
-def _atomic_write(path: Path, chunks: Iterable[bytes | np.ndarray]) -> None:
-    """Write to a temp file beside ``path``, then rename over it; never leave the temp file behind."""
-    tmp = path.with_name(f".{path.name}.{secrets.token_hex(4)}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            for chunk in chunks:
-                f.write(chunk)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
