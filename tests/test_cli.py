@@ -1,0 +1,226 @@
+"""Tests for the command line (core.cli): info, render, demo and the error contract.
+
+Most run ``main([...])`` in-process on small generated scenes, rendering with the portable torch
+backend (no compiler needed) except the demo and default-backend tests, which use the automatic
+choice (the fast CPU kernel where it builds); one test runs ``python -m gt2gs_blender`` as a real
+subprocess.
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from gt2gs_blender.core import cli
+from gt2gs_blender.core.cameras import auto_views, load_cameras_json, save_cameras_json
+from gt2gs_blender.core.ply import read_ply, write_ply
+
+REPO = Path(__file__).resolve().parents[1]
+DONUT = REPO.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
+PORTABLE = ["--backend", "torch", "--device", "cpu"]
+
+
+@pytest.fixture
+def small_ply(tmp_path: Path) -> Path:
+    """A 1,200-Gaussian torus written as a 3DGS PLY."""
+    path = tmp_path / "torus.ply"
+    write_ply(path, cli.torus_scene(n_major=40, n_minor=30))
+    return path
+
+
+def run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
+    """main(argv) -> (exit code, stdout, stderr)."""
+    code = cli.main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def read_png(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert image is not None, path
+    return image
+
+
+def foreground_fraction(path: Path, background_bgr: tuple[int, int, int] = (255, 255, 255)) -> float:
+    """Fraction of pixels that differ from the background colour."""
+    return float(np.any(read_png(path) != background_bgr, axis=-1).mean())
+
+
+# -- info -------------------------------------------------------------------------------------------
+
+
+def test_info_generated_ply(capsys, small_ply):
+    code, out, err = run(capsys, "info", str(small_ply))
+    assert code == 0 and err == ""
+    assert "1,200" in out and "binary_little_endian" in out
+    assert "float: x y z f_dc_0..2 opacity scale_0..2 rot_0..3" in out
+
+
+def test_info_json_generated_ply(capsys, small_ply):
+    code, out, _ = run(capsys, "info", str(small_ply), "--json")
+    info = json.loads(out)
+    assert code == 0
+    assert (info["count"], info["sh_degree"], info["normals"], info["extras"]) == (1200, 0, False, [])
+    assert len(info["properties"]) == 14 and info["properties"][0] == {"name": "x", "type": "float"}
+    lo, hi = np.array(info["bounds"]["min"]), np.array(info["bounds"]["max"])
+    np.testing.assert_allclose(hi, [1.4, 1.4, 0.4], atol=0.01)
+    np.testing.assert_allclose(lo, [-1.4, -1.4, -0.4], atol=0.01)
+    assert np.all(np.array(info["robust_bounds"]["min"]) >= lo)
+    assert np.all(np.array(info["robust_bounds"]["max"]) <= hi)
+
+
+def test_info_shared_donut(capsys):
+    if not DONUT.is_file():
+        pytest.skip(f"shared donut scene not found at {DONUT}")
+    code, out, _ = run(capsys, "info", str(DONUT), "--json")
+    info = json.loads(out)
+    assert code == 0
+    assert (info["count"], info["sh_degree"], info["format"]) == (45624, 0, "binary_little_endian")
+
+
+def test_info_as_subprocess(small_ply):
+    result = subprocess.run([sys.executable, "-m", "gt2gs_blender", "info", str(small_ply), "--json"],
+                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert json.loads(result.stdout)["count"] == 1200
+
+
+# -- render -----------------------------------------------------------------------------------------
+
+
+def test_render_generated_views(capsys, small_ply, tmp_path):
+    out_dir = tmp_path / "renders"
+    code, out, err = run(capsys, "render", str(small_ply), "--views", "3", "--width", "64", "--depth",
+                         "-o", str(out_dir), *PORTABLE)
+    assert code == 0, err
+    assert str(out_dir) in out and "backend torch" in out
+    views = sorted(out_dir.glob("view_*.png"))
+    assert [p.name for p in views] == ["view_000.png", "view_001.png", "view_002.png"]
+    for view in views:
+        assert read_png(view).shape == (64, 64, 3)
+        assert 0.05 < foreground_fraction(view) < 0.95
+    depth = read_png(out_dir / "depth_000.png")
+    assert depth.dtype == np.uint16 and depth.max() == 65535 and (depth == 0).any()
+    assert len(load_cameras_json(out_dir / "cameras.json")) == 3
+
+
+def test_render_cameras_json_at_their_size_and_scaled(capsys, small_ply, tmp_path):
+    scene = read_ply(small_ply)
+    cameras = auto_views(scene, 2, width=48, height=32) + auto_views(scene, 1, width=40, height=40)
+    save_cameras_json(tmp_path / "cameras.json", cameras)
+    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path / "cameras.json"),
+                       "-o", str(tmp_path / "a"), "--background", "0,0,0", *PORTABLE)
+    assert code == 0, err
+    shapes = [read_png(tmp_path / "a" / f"view_{i:03d}.png").shape for i in range(3)]
+    assert shapes == [(32, 48, 3), (32, 48, 3), (40, 40, 3)]
+    assert foreground_fraction(tmp_path / "a" / "view_002.png", (0, 0, 0)) > 0.05
+    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path / "a"), "--scale", "0.5",
+                       "-o", str(tmp_path / "b"), *PORTABLE)
+    assert code == 0, err
+    assert read_png(tmp_path / "b" / "view_000.png").shape == (16, 24, 3)
+
+
+def test_render_default_backend(capsys, small_ply, tmp_path):
+    code, out, err = run(capsys, "render", str(small_ply), "--views", "1", "--width", "32", "-o", str(tmp_path))
+    assert code == 0, err
+    assert (tmp_path / "view_000.png").is_file() and "backend " in out
+
+
+# -- errors -----------------------------------------------------------------------------------------
+
+
+def assert_one_line_error(err: str, *needles: str) -> None:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("gt2gs: error: ") and "Traceback" not in err
+    for needle in needles:
+        assert needle in lines[0]
+
+
+def test_missing_file_is_one_line(capsys, tmp_path):
+    missing = tmp_path / "nope.ply"
+    code, out, err = run(capsys, "info", str(missing))
+    assert code == 2 and out == ""
+    assert_one_line_error(err, str(missing))
+    code, _, err = run(capsys, "render", str(missing), "-o", str(tmp_path / "out"))
+    assert code == 2
+    assert_one_line_error(err, str(missing))
+
+
+def test_malformed_ply_is_one_line(capsys, tmp_path):
+    bad = tmp_path / "garbage.ply"
+    bad.write_bytes(np.random.default_rng(0).integers(0, 256, 500, dtype=np.uint8).tobytes())
+    code, out, err = run(capsys, "info", str(bad))
+    assert code == 2 and out == ""
+    assert_one_line_error(err, str(bad))
+
+
+def test_bad_cameras_file_is_one_line(capsys, small_ply, tmp_path):
+    cams = tmp_path / "cameras.json"
+    cams.write_text("[{\"width\": 10}]")
+    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(cams), "-o", str(tmp_path / "o"))
+    assert code == 2
+    assert_one_line_error(err, str(cams))
+
+
+def test_conflicting_options_are_user_errors(capsys, small_ply, tmp_path):
+    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path), "--width", "10",
+                       "-o", str(tmp_path / "o"))
+    assert code == 2
+    assert_one_line_error(err, "--scale")
+    code, _, err = run(capsys, "render", str(small_ply), "--background", "2,0,0", "-o", str(tmp_path))
+    assert code == 2 and "--background" in err
+
+
+def test_debug_prints_the_traceback(capsys, tmp_path):
+    missing = tmp_path / "nope.ply"
+    for argv in (["--debug", "info", str(missing)], ["info", str(missing), "--debug"]):
+        code, _, err = run(capsys, *argv)
+        assert code == 2
+        assert "Traceback (most recent call last)" in err
+        assert err.strip().splitlines()[-1].startswith("gt2gs: error: ")
+
+
+def test_internal_error_exit_code_1(capsys, small_ply, monkeypatch):
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(cli, "read_ply", broken)
+    code, _, err = run(capsys, "info", str(small_ply))
+    assert code == 1
+    assert_one_line_error(err, "internal error", "--debug", "boom")
+
+
+def test_usage_errors_exit_2(capsys):
+    assert cli.main([]) == 2
+    assert cli.main(["render", "x.ply"]) == 2  # -o is required
+    assert cli.main(["--help"]) == 0
+    capsys.readouterr()
+
+
+# -- demo -------------------------------------------------------------------------------------------
+
+
+def test_demo_on_a_given_scene(capsys, small_ply, tmp_path):
+    out_dir = tmp_path / "demo"
+    code, out, err = run(capsys, "demo", "--scene", str(small_ply), "--size", "48", "--out", str(out_dir))
+    assert code == 0, err
+    views = sorted(out_dir.glob("view_*.png"))
+    assert len(views) == 8 and all(foreground_fraction(v) > 0.05 for v in views)
+    sheet = read_png(out_dir / "contact_sheet.png")
+    assert sheet.shape == (2 * 48, 4 * 48, 3)
+    np.testing.assert_array_equal(sheet[48:, 48:96], read_png(views[5]))
+    assert str(out_dir / "contact_sheet.png") in out
+
+
+def test_demo_generates_a_torus_without_shared(capsys, tmp_path, monkeypatch):
+    monkeypatch.setattr(cli, "SHARED_DONUT", tmp_path / "absent.ply")
+    code, out, err = run(capsys, "demo", "--size", "32", "--views", "3", "--out", str(tmp_path / "d"))
+    assert code == 0, err
+    assert "generated torus" in out
+    assert read_png(tmp_path / "d" / "contact_sheet.png").shape == (32, 96, 3)
