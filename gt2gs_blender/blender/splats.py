@@ -1,0 +1,505 @@
+"""Gaussian scenes as Blender point-cloud objects, and back.
+
+One point per Gaussian. Every PLY vertex property is a POINT attribute named as in the file (INRIA
+names: ``f_dc_0``, ``f_rest_*``, ``opacity``, ``scale_*``, ``rot_*``, normals, extras); x, y, z are
+the point positions. Float properties become FLOAT attributes, integer ones INT attributes (uint32
+keeps its bits). Blender-owned names (``position``, ``radius``, the colour attribute, names starting
+with ".") cannot hold a PLY property; such a property is stored as ``ply:<name>`` and mapped back on
+export. Two display attributes are added and never exported:
+
+- ``Col`` (FLOAT_COLOR): the DC colour 0.5 + C0·f_dc, clamped to [0, 1] and converted from sRGB to
+  scene-linear (Blender's convention for float colours), alpha = sigmoid(opacity);
+- ``radius``: the point-cloud sphere radius, the radius of the disc with the area of the splat's
+  1σ ellipse across its two largest axes, clamped to 5% of the scene's extent against floaters.
+
+The source layout (property order and types), file format and path are kept as JSON in the custom
+property ``gt2gs_ply`` of the PointCloud data, so an unchanged object exports byte for byte.
+
+The PLY is in the object's local space; exporting may bake the object's world transform.
+Nothing here loops over points in Python.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+from . import transform
+
+COLOR_ATTRIBUTE = "Col"
+RADIUS_ATTRIBUTE = "radius"
+POSITION_ATTRIBUTE = "position"
+META_KEY = "gt2gs_ply"
+MATERIAL_NAME = "GT² Splats"
+MATERIAL_TAG = "gt2gs_splat_material"
+RENAME_PREFIX = "ply:"
+MAX_ATTRIBUTE_NAME = 63
+"""Longest attribute name (bytes) Blender keeps without truncating."""
+RADIUS_MAX_FRACTION = 0.05
+"""Largest display radius as a fraction of the scene's (1%-99% quantile) bounding-box diagonal."""
+
+SH_C0 = 0.28209479177387814
+REQUIRED = ("f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+            "rot_0", "rot_1", "rot_2", "rot_3")
+"""Point attributes (besides positions) that make a point cloud a splat object."""
+RESERVED = frozenset({POSITION_ATTRIBUTE, RADIUS_ATTRIBUTE, COLOR_ATTRIBUTE})
+
+_INT_CODES = {"i1", "u1", "i2", "u2", "i4", "u4"}
+_FLOAT_CODES = {"f4", "f8"}
+_PLY_TYPE_CODE = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
+    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_TYPE_FOR_CODE = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort",
+                  "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+
+
+class SplatObjectError(ValueError):
+    """An object cannot be read back as Gaussians; the message is meant for the user."""
+
+
+# -- naming -------------------------------------------------------------------------------------------
+
+
+def core_property_names(sh_rest_per_channel: int) -> list[str]:
+    """The Gaussian parameters' PLY names in canonical INRIA order (positions first)."""
+    return ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2",
+            *(f"f_rest_{i}" for i in range(3 * sh_rest_per_channel)),
+            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+
+
+def attribute_name_for(prop: str) -> str:
+    """The point attribute that holds PLY property ``prop``."""
+    if prop in RESERVED or prop.startswith(".") or prop.startswith(RENAME_PREFIX):
+        return RENAME_PREFIX + prop
+    return prop
+
+
+# -- GaussianScene -> object --------------------------------------------------------------------------
+
+
+def scene_to_object(
+    scene,
+    name: str,
+    collection: bpy.types.Collection,
+    *,
+    source_path: str | None = None,
+    source_format: str | None = None,
+    with_material: bool = True,
+) -> bpy.types.Object:
+    """A new point-cloud object for ``scene`` (a core ``GaussianScene``), linked into ``collection``.
+
+    Needs a context with a scene and view layer (Blender converts mesh -> point cloud with its
+    operator). On failure nothing is left behind.
+    """
+    columns, layout = _scene_columns(scene)
+    for prop in columns:
+        attr = attribute_name_for(prop)
+        if len(attr.encode("utf-8")) > MAX_ATTRIBUTE_NAME:
+            raise SplatObjectError(f"PLY property name {prop!r} is longer than Blender's attribute names "
+                                   f"({MAX_ATTRIBUTE_NAME} bytes)")
+    n = len(scene)
+    created: list[bpy.types.ID] = []
+    try:
+        mesh = bpy.data.meshes.new(name)
+        created.append(mesh)
+        mesh.vertices.add(n)
+        means = _np(scene.means)
+        mesh.vertices.foreach_set("co", np.ascontiguousarray(means, np.float32).ravel())
+        for prop, values in columns.items():
+            kind = "INT" if values.dtype == np.int32 else "FLOAT"
+            attr = mesh.attributes.new(attribute_name_for(prop), kind, "POINT")
+            attr.data.foreach_set("value", values)
+        colors = splat_colors(_np(scene.sh_dc), _np(scene.opacity_logits))
+        mesh.attributes.new(COLOR_ATTRIBUTE, "FLOAT_COLOR", "POINT").data.foreach_set("color", colors.ravel())
+        radii = display_radii(_np(scene.log_scales), means)
+        mesh.attributes.new(RADIUS_ATTRIBUTE, "FLOAT", "POINT").data.foreach_set("value", radii)
+
+        obj = bpy.data.objects.new(name, mesh)
+        created.append(obj)
+        # Convert in the scene's own collection, which is always in the view layer and visible, then
+        # move the object to its collection (which may be hidden or excluded).
+        master = bpy.context.scene.collection
+        master.objects.link(obj)
+        _convert_to_point_cloud(obj)
+        if collection != master:
+            collection.objects.link(obj)
+            master.objects.unlink(obj)
+        cloud = obj.data
+        created.append(cloud)
+        created.remove(mesh)
+        try:
+            bpy.data.meshes.remove(mesh)  # left without users by the conversion
+        except ReferenceError:
+            pass
+        if cloud.name != name:
+            cloud.name = name
+        set_meta(cloud, layout=layout, fmt=source_format, source=source_path)
+        if with_material:
+            material, made = ensure_material()
+            if made:
+                created.append(material)
+            cloud.materials.append(material)
+        return obj
+    except BaseException:
+        _remove_ids(created)
+        raise
+
+
+def _scene_columns(scene) -> tuple[dict[str, np.ndarray], list[list[str]]]:
+    """PLY property -> contiguous 1-D attribute values (float32 or int32), in file order; and the layout."""
+    rest = _np(scene.sh_rest)
+    n, k = rest.shape[:2]
+    groups = {
+        "f_dc_": np.ascontiguousarray(_np(scene.sh_dc).T),
+        "f_rest_": np.ascontiguousarray(rest.transpose(2, 1, 0)).reshape(3 * k, n),  # channel-major
+        "scale_": np.ascontiguousarray(_np(scene.log_scales).T),
+        "rot_": np.ascontiguousarray(_np(scene.quats).T),
+    }
+    core: dict[str, np.ndarray] = {"opacity": np.ascontiguousarray(_np(scene.opacity_logits).reshape(-1))}
+    for prefix, rows in groups.items():
+        for i, row in enumerate(rows):
+            core[f"{prefix}{i}"] = row
+    core = {p: v.astype(np.float32, copy=False) for p, v in core.items()}
+    extras = {p: _attribute_values(np.asarray(v)) for p, v in scene.extras.items()}
+
+    source = [[str(p), str(t)] for p, t in scene.ply_layout or ()]
+    if source and sorted(p for p, _ in source) == sorted(["x", "y", "z", *core, *extras]):
+        layout = source
+    else:  # no layout, or one the scene no longer fits: canonical INRIA order, as core writes it
+        names = core_property_names(k)
+        normals = [p for p in ("nx", "ny", "nz") if p in extras]
+        order = names[:3] + normals + names[3:] + [p for p in extras if p not in normals]
+        layout = [[p, "float" if p not in scene.extras else _TYPE_FOR_CODE[_code(scene.extras[p].dtype)]]
+                  for p in order]
+    columns = {prop: core[prop] if prop in core else extras[prop] for prop, _ in layout
+               if prop not in ("x", "y", "z")}
+    return columns, layout
+
+
+def _attribute_values(values: np.ndarray) -> np.ndarray:
+    code = _code(values.dtype)
+    if code in _FLOAT_CODES:
+        return np.ascontiguousarray(values, np.float32)
+    if code == "u4":
+        return np.ascontiguousarray(values.astype(np.uint32, copy=False)).view(np.int32)  # keep the bits
+    if code in _INT_CODES:
+        return np.ascontiguousarray(values, np.int32)
+    raise SplatObjectError(f"cannot store a property of type {values.dtype} as a Blender attribute")
+
+
+def splat_colors(sh_dc: np.ndarray, opacity_logits: np.ndarray) -> np.ndarray:
+    """(N,4) float32 scene-linear RGBA: sRGB DC colour clamped to [0,1] -> linear, alpha = sigmoid(opacity)."""
+    srgb = np.clip(0.5 + SH_C0 * sh_dc.astype(np.float32), 0.0, 1.0)
+    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+    rgba = np.empty((len(srgb), 4), np.float32)
+    rgba[:, :3] = linear
+    with np.errstate(over="ignore"):
+        rgba[:, 3] = 1.0 / (1.0 + np.exp(-opacity_logits.astype(np.float32).reshape(-1)))
+    return rgba
+
+
+def display_radii(log_scales: np.ndarray, means: np.ndarray) -> np.ndarray:
+    """Sphere radius per splat: sqrt of the two largest 1σ scales' product, clamped against floaters."""
+    n = len(log_scales)
+    if n == 0:
+        return np.empty(0, np.float32)
+    top_two = np.sort(log_scales.astype(np.float32), axis=1)[:, 1:]
+    radii = np.exp(top_two.mean(axis=1))
+    if n >= 2:
+        lo, hi = np.quantile(means, [0.01, 0.99], axis=0)
+        diagonal = float(np.linalg.norm(hi - lo))
+    else:
+        diagonal = 0.0
+    upper = RADIUS_MAX_FRACTION * diagonal if diagonal > 0 else 1.0
+    return np.ascontiguousarray(np.clip(np.nan_to_num(radii, nan=0.0, posinf=upper), 0.0, upper), np.float32)
+
+
+def _convert_to_point_cloud(obj: bpy.types.Object) -> None:
+    """Mesh object -> point-cloud object in place (bpy cannot size a PointCloud before Blender 5.1)."""
+    with bpy.context.temp_override(active_object=obj, object=obj, selected_objects=[obj],
+                                   selected_editable_objects=[obj]):
+        result = bpy.ops.object.convert(target="POINTCLOUD")
+    if result != {"FINISHED"} or obj.type != "POINTCLOUD":
+        raise SplatObjectError(f"Blender could not convert the mesh to a point cloud ({result})")
+
+
+# -- material -------------------------------------------------------------------------------------------
+
+
+def find_material() -> bpy.types.Material | None:
+    """The shared splat material of this file, if there is one."""
+    for material in bpy.data.materials:
+        if material.get(MATERIAL_TAG) and material.node_tree is not None and material.library is None:
+            return material
+    return None
+
+
+def ensure_material() -> tuple[bpy.types.Material, bool]:
+    """The shared splat material (emission from the colour attribute, alpha from opacity); made if absent."""
+    material = find_material()
+    if material is not None:
+        return material, False
+    material = bpy.data.materials.new(MATERIAL_NAME)
+    try:
+        material[MATERIAL_TAG] = True
+        if bpy.app.version < (5, 0, 0):
+            material.use_nodes = True  # always on (and deprecated) from 5.0
+        nodes, links = material.node_tree.nodes, material.node_tree.links
+        nodes.clear()
+        attribute = nodes.new("ShaderNodeAttribute")
+        attribute.attribute_type = "GEOMETRY"
+        attribute.attribute_name = COLOR_ATTRIBUTE
+        attribute.location = (-600, 0)
+        emission = nodes.new("ShaderNodeEmission")
+        emission.inputs["Strength"].default_value = 1.0
+        emission.location = (-300, -100)
+        transparent = nodes.new("ShaderNodeBsdfTransparent")
+        transparent.location = (-300, 100)
+        mix = nodes.new("ShaderNodeMixShader")
+        mix.location = (0, 0)
+        output = nodes.new("ShaderNodeOutputMaterial")
+        output.location = (250, 0)
+        links.new(attribute.outputs["Color"], emission.inputs["Color"])
+        links.new(attribute.outputs["Alpha"], mix.inputs["Fac"])
+        links.new(transparent.outputs["BSDF"], mix.inputs[1])
+        links.new(emission.outputs["Emission"], mix.inputs[2])
+        links.new(mix.outputs["Shader"], output.inputs["Surface"])
+        material.diffuse_color = (0.8, 0.8, 0.8, 1.0)
+    except BaseException:
+        bpy.data.materials.remove(material)
+        raise
+    return material, True
+
+
+# -- object -> GaussianScene ----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SplatSummary:
+    """What the sidebar shows about a splat object."""
+
+    name: str
+    count: int
+    sh_degree: int
+    extras: tuple[str, ...]
+    source: str | None
+    format: str | None
+
+
+def is_splat_object(obj) -> bool:
+    """A point-cloud object with the Gaussian attributes (however it was made)."""
+    if obj is None or obj.type != "POINTCLOUD" or obj.data is None:
+        return False
+    attributes = obj.data.attributes
+    return all(_point_attribute(attributes, name) is not None for name in REQUIRED)
+
+
+def splat_summary(obj) -> SplatSummary | None:
+    """Count, SH degree, extras and source of a splat object; None for anything else. Cheap (no data read)."""
+    if not is_splat_object(obj):
+        return None
+    cloud = obj.data
+    meta = get_meta(cloud)
+    k = _rest_per_channel(cloud.attributes)
+    degree = int(round(math.sqrt(k + 1))) - 1 if k is not None else -1
+    extras = tuple(prop for prop, _ in _export_properties(cloud, meta, k or 0)[2])
+    return SplatSummary(name=obj.name, count=len(cloud.points), sh_degree=degree, extras=extras,
+                        source=meta.get("source"), format=meta.get("format"))
+
+
+def object_to_scene(obj, *, bake_transform: bool = False):
+    """The object's Gaussians as a core ``GaussianScene``, and notes for the user.
+
+    With ``bake_transform`` the object's world matrix is baked into the Gaussians (see ``transform``);
+    otherwise they stay in the object's local space, exactly as stored.
+    """
+    import torch
+
+    from ..core.scene import GaussianScene
+
+    if not is_splat_object(obj):
+        raise SplatObjectError(f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "
+                               f"(needs the attributes {', '.join(REQUIRED)})")
+    cloud = obj.data
+    meta = get_meta(cloud)
+    attributes = cloud.attributes
+    n = len(cloud.points)
+    k = _rest_per_channel(attributes)
+    if k is None:
+        raise SplatObjectError(f"{obj.name!r}: the f_rest_* attributes do not form an SH degree 0-3 set "
+                               "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
+    layout, notes, extras_props = _export_properties(cloud, meta, k)
+
+    means = np.empty(n * 3, np.float32)
+    if n:  # an empty point cloud has no position attribute
+        attributes[POSITION_ATTRIBUTE].data.foreach_get("vector", means)
+    means = means.reshape(n, 3)
+
+    def block(names: list[str]) -> np.ndarray:
+        out = np.empty((len(names), n), np.float32)
+        for row, prop in zip(out, names, strict=True):
+            attr = _point_attribute(attributes, attribute_name_for(prop))
+            if attr.data_type == "FLOAT":
+                attr.data.foreach_get("value", row)
+            else:
+                raw = np.empty(n, np.int32)
+                attr.data.foreach_get("value", raw)
+                row[:] = raw
+        return out
+
+    sh_dc = np.ascontiguousarray(block([f"f_dc_{i}" for i in range(3)]).T)
+    sh_rest = np.ascontiguousarray(block([f"f_rest_{i}" for i in range(3 * k)]).reshape(3, k, n).transpose(2, 1, 0))
+    opacity = block(["opacity"]).reshape(n)
+    log_scales = np.ascontiguousarray(block([f"scale_{i}" for i in range(3)]).T)
+    quats = np.ascontiguousarray(block([f"rot_{i}" for i in range(4)]).T)
+    extras = {prop: _read_extra(attributes, prop, code, n) for prop, code in extras_props}
+
+    if bake_transform:
+        matrix = np.array(obj.matrix_world, np.float64)
+        if not transform.is_identity(matrix):
+            has_normals = all(p in extras and extras[p].dtype.kind == "f" for p in ("nx", "ny", "nz"))
+            arrays = transform.GaussianArrays(
+                means=means, quats=quats, log_scales=log_scales, sh_rest=sh_rest,
+                normals=np.stack([extras[p] for p in ("nx", "ny", "nz")], axis=1) if has_normals else None)
+            try:
+                baked = transform.bake(arrays, matrix)
+            except transform.TransformError as exc:
+                raise SplatObjectError(f"{obj.name!r}: {exc}") from None
+            means, quats, log_scales, sh_rest = baked.means, baked.quats, baked.log_scales, baked.sh_rest
+            if baked.normals is not None:
+                for i, p in enumerate(("nx", "ny", "nz")):
+                    extras[p] = np.ascontiguousarray(baked.normals[:, i], extras[p].dtype)
+            notes.extend(baked.notes)
+
+    scene = GaussianScene(
+        means=torch.from_numpy(np.ascontiguousarray(means)),
+        quats=torch.from_numpy(quats),
+        log_scales=torch.from_numpy(log_scales),
+        opacity_logits=torch.from_numpy(opacity),
+        sh_dc=torch.from_numpy(sh_dc),
+        sh_rest=torch.from_numpy(sh_rest),
+        extras=extras,
+        ply_layout=tuple((p, t) for p, t in layout) if layout is not None else None,
+    )
+    return scene, notes
+
+
+def _export_properties(cloud, meta: dict, k: int):
+    """(layout or None, notes, [(extra property, numpy type code)]) for what an export would write."""
+    attributes = cloud.attributes
+    core = set(core_property_names(k))
+    notes: list[str] = []
+    layout = meta.get("layout")
+    extras: list[tuple[str, str]] = []
+    listed: set[str] = set()
+    if layout is not None:
+        for prop, ply_type in layout:
+            listed.add(prop)
+            if prop in core or prop.startswith("f_rest_"):
+                continue
+            attr = _point_attribute(attributes, attribute_name_for(prop))
+            if attr is None or attr.data_type not in ("FLOAT", "INT"):
+                notes.append(f"property {prop!r} of the source file has no attribute any more; not written")
+                continue
+            code = _PLY_TYPE_CODE.get(ply_type, "f4")
+            if (code in _FLOAT_CODES) != (attr.data_type == "FLOAT"):
+                code = "f4" if attr.data_type == "FLOAT" else "i4"
+            extras.append((prop, code))
+    for attr in attributes:
+        name = attr.name
+        if (attr.domain != "POINT" or attr.data_type not in ("FLOAT", "INT") or name.startswith(".")
+                or name in RESERVED):
+            continue
+        prop = name[len(RENAME_PREFIX):] if name.startswith(RENAME_PREFIX) else name
+        if prop in listed or prop in core or prop.startswith("f_rest_"):
+            continue
+        extras.append((prop, "f4" if attr.data_type == "FLOAT" else "i4"))
+    return layout, notes, extras
+
+
+def _read_extra(attributes, prop: str, code: str, n: int) -> np.ndarray:
+    attr = _point_attribute(attributes, attribute_name_for(prop))
+    if attr.data_type == "FLOAT":
+        values = np.empty(n, np.float32)
+        attr.data.foreach_get("value", values)
+        return values.astype(code, copy=False)
+    values = np.empty(n, np.int32)
+    attr.data.foreach_get("value", values)
+    if code == "u4":
+        return values.view(np.uint32).copy()
+    info = np.iinfo(code)
+    return np.clip(values, info.min, info.max).astype(code)
+
+
+def _rest_per_channel(attributes) -> int | None:
+    """K (f_rest per channel) from the f_rest_* attributes; None if they are not a full SH set."""
+    names = {a.name for a in attributes if a.name.startswith("f_rest_") and a.domain == "POINT"
+             and a.data_type == "FLOAT"}
+    for degree in range(4):
+        count = 3 * ((degree + 1) ** 2 - 1)
+        if names == {f"f_rest_{i}" for i in range(count)}:
+            return count // 3
+    return None
+
+
+def _point_attribute(attributes, name: str):
+    attr = attributes.get(name)
+    if attr is None or attr.domain != "POINT":
+        return None
+    return attr
+
+
+# -- metadata -------------------------------------------------------------------------------------------
+
+
+def set_meta(cloud, *, layout, fmt: str | None, source: str | None) -> None:
+    cloud[META_KEY] = json.dumps({"version": 1, "layout": layout, "format": fmt, "source": source})
+
+
+def get_meta(cloud) -> dict:
+    """The stored source layout/format/path; {} when absent or unreadable (then exports use INRIA order)."""
+    raw = cloud.get(META_KEY)
+    if not isinstance(raw, str):
+        return {}
+    try:
+        meta = json.loads(raw)
+    except ValueError:
+        return {}
+    if not isinstance(meta, dict):
+        return {}
+    layout = meta.get("layout")
+    if layout is not None and not (isinstance(layout, list) and all(
+            isinstance(e, list) and len(e) == 2 and all(isinstance(s, str) for s in e) for e in layout)):
+        meta["layout"] = None
+    return meta
+
+
+# -- helpers --------------------------------------------------------------------------------------------
+
+
+def _np(tensor) -> np.ndarray:
+    """A tensor (torch or numpy) as a numpy array, without copying when possible."""
+    if hasattr(tensor, "detach"):
+        return tensor.detach().cpu().numpy()
+    return np.asarray(tensor)
+
+
+def _code(dtype: np.dtype) -> str:
+    return f"{dtype.kind}{dtype.itemsize}"
+
+
+def _remove_ids(ids: list) -> None:
+    for block in reversed(ids):
+        try:
+            collection = {
+                bpy.types.Object: bpy.data.objects, bpy.types.Mesh: bpy.data.meshes,
+                bpy.types.PointCloud: bpy.data.pointclouds, bpy.types.Material: bpy.data.materials,
+            }[type(block)]
+            collection.remove(block)
+        except (KeyError, ReferenceError, RuntimeError):
+            pass

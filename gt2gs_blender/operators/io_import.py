@@ -1,0 +1,176 @@
+"""File ▸ Import ▸ Gaussian Splat (.ply), and drag-and-drop of .ply files into the 3D viewport."""
+from __future__ import annotations
+
+import os
+import warnings
+
+import bpy
+from bpy.props import BoolProperty, CollectionProperty, StringProperty
+from bpy_extras.io_utils import ImportHelper
+
+from ..blender import splats
+
+
+def engine_missing_message(exc: ImportError) -> str:
+    """One line for a user whose Blender lacks the engine's Python packages (torch is not bundled)."""
+    return (f"GT² needs its Python dependencies to read and write splat files ({exc.name or exc} is not "
+            "installed in Blender's Python)")
+
+
+class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
+    """Import 3D Gaussian Splatting .ply files as point-cloud objects, every PLY property as an attribute"""
+
+    bl_idname = "gt2gs.import_ply"
+    bl_label = "Import Gaussian Splat"
+    bl_options = {"REGISTER", "UNDO"}
+
+    filename_ext = ".ply"
+    filter_glob: StringProperty(default="*.ply", options={"HIDDEN"})
+    directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
+
+    drop_invalid: BoolProperty(
+        name="Drop Invalid Splats",
+        description="Load files with NaN/Inf parameters by leaving those splats out (otherwise such a file "
+                    "is refused)",
+        default=False,
+    )
+    add_material: BoolProperty(
+        name="Splat Material",
+        description="Give the object a material that shows the splat colours in Material Preview and renders",
+        default=True,
+    )
+
+    def invoke(self, context, event):
+        return self.invoke_popup(context)  # a confirmation for drag-and-drop, else the file browser
+
+    def execute(self, context):
+        paths = self._paths()
+        if not paths:
+            self.report({"ERROR"}, "No file to import")
+            return {"CANCELLED"}
+        try:
+            from ..core.errors import GT2GSError
+            from ..core.ply import read_ply, read_ply_header
+        except ImportError as exc:
+            self.report({"ERROR"}, engine_missing_message(exc))
+            return {"CANCELLED"}
+
+        if context.mode != "OBJECT" and context.active_object is not None:
+            bpy.ops.object.mode_set(mode="OBJECT")
+        collection = _target_collection(context)
+        material_before = splats.find_material()
+        created: list[bpy.types.Object] = []
+        notes: list[str] = []
+
+        def undo_partial_import() -> None:
+            _remove_objects(created)
+            material = splats.find_material()
+            if material_before is None and material is not None and not material.users:
+                bpy.data.materials.remove(material)
+
+        try:
+            for path in paths:
+                header = read_ply_header(path)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always")
+                    scene = read_ply(path, drop_invalid=self.drop_invalid)
+                notes.extend(str(w.message) for w in caught)
+                created.append(splats.scene_to_object(
+                    scene, object_name_for(path), collection, source_path=path, source_format=header.format,
+                    with_material=self.add_material))
+        except (GT2GSError, splats.SplatObjectError) as exc:
+            undo_partial_import()
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        except MemoryError:
+            failed = paths[len(created)]
+            undo_partial_import()
+            self.report({"ERROR"}, f"{failed}: not enough memory to import it")
+            return {"CANCELLED"}
+        except BaseException:  # a bug: leave the scene as it was, let Blender show the traceback
+            undo_partial_import()
+            raise
+
+        for obj in context.view_layer.objects.selected:
+            obj.select_set(False)
+        for obj in created:
+            if obj.visible_get():
+                obj.select_set(True)
+        context.view_layer.objects.active = created[-1]
+        for note in notes:
+            self.report({"WARNING"}, note)
+        total = sum(len(obj.data.points) for obj in created)
+        self.report({"INFO"}, f"Imported {total:,} splats from {len(created)} file{'s' * (len(created) > 1)}")
+        return {"FINISHED"}
+
+    def _paths(self) -> list[str]:
+        if self.directory and any(f.name for f in self.files):
+            paths = [os.path.join(self.directory, f.name) for f in self.files if f.name]
+        else:
+            paths = [self.filepath] if self.filepath else []
+        return [os.path.abspath(bpy.path.abspath(p)) for p in paths]  # "//" = beside the .blend file
+
+
+class GT2GS_FH_ply(bpy.types.FileHandler):
+    """Drop .ply files on the 3D viewport to import them as Gaussian splats."""
+
+    bl_idname = "GT2GS_FH_ply"
+    bl_label = "Gaussian Splat"
+    bl_import_operator = GT2GS_OT_import_ply.bl_idname
+    bl_file_extensions = ".ply"
+
+    @classmethod
+    def poll_drop(cls, context):
+        return context.area is not None and context.area.type == "VIEW_3D"
+
+
+def object_name_for(path: str) -> str:
+    """The file's name, or for the trainers' generic ``point_cloud.ply`` the scene folder's name.
+
+    ``.../garden/point_cloud/iteration_30000/point_cloud.ply`` -> ``garden``.
+    """
+    stem = bpy.path.display_name_from_filepath(path)
+    if stem.lower() != "point_cloud":
+        return stem or "Gaussian Splat"
+    parts = os.path.normpath(os.path.abspath(path)).split(os.sep)[:-1]
+    for part in reversed(parts):
+        if part and part.lower() != "point_cloud" and not part.lower().startswith("iteration_"):
+            return part
+    return stem
+
+
+def _target_collection(context) -> bpy.types.Collection:
+    """The active collection (where Blender's importers put objects) unless it is linked from a library."""
+    layer_collection = context.view_layer.active_layer_collection
+    if layer_collection is not None and layer_collection.collection.library is None:
+        return layer_collection.collection
+    return context.scene.collection
+
+
+def _remove_objects(objects: list) -> None:
+    """Remove imported objects with their point clouds (the shared material stays if it was there)."""
+    for obj in objects:
+        data = obj.data
+        bpy.data.objects.remove(obj)
+        if data is not None and data.users == 0:
+            bpy.data.pointclouds.remove(data)
+
+
+def menu_func_import(self, context):
+    self.layout.operator(GT2GS_OT_import_ply.bl_idname, text="Gaussian Splat (.ply)")
+
+
+classes = (GT2GS_OT_import_ply, GT2GS_FH_ply)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.TOPBAR_MT_file_import.append(menu_func_import)
+
+
+def unregister() -> None:
+    bpy.types.TOPBAR_MT_file_import.remove(menu_func_import)
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
