@@ -48,6 +48,8 @@ def resolve_backend(backend: str, device: torch.device | str) -> str:
     """The backend that will run: ``auto`` picks the fastest; an unavailable choice falls back, logged."""
     if backend != "auto" and backend not in BACKENDS:
         raise ValueError(f"unknown rasterizer backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
+    if backend == "torch":  # always usable; never pay for building the C++ kernel
+        return backend
     usable = available_backends(device)
     if backend == "auto":
         return usable[0]

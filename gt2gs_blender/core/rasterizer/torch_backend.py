@@ -1,6 +1,6 @@
 """The portable backend: compositing in plain torch (CPU or CUDA), all tiles at once, in depth chunks.
 
-Each step takes the next ``CHUNK`` entries of every still-active tile's list and composites them
+Each step takes the next chunk of entries of every still-active tile's list and composites them
 for the tile's 64 pixels with cumulative products. The backward recomputes the same chunks front
 to back (the colour behind an entry is the final colour minus the running prefix, both dotted with the
 pixel's colour gradient so only scalars per pixel are kept), so memory stays bounded by one chunk instead of growing with the number of (entry, pixel) pairs.
@@ -14,7 +14,11 @@ import torch
 from .binning import TileBins, bin_entries_torch
 from .projection import ALPHA_MIN, TILE, Projection, tile_grid
 
-CHUNK = 16
+CHUNK_MIN = 16
+CHUNK_MAX = 1024
+CHUNK_ELEMENTS = 1 << 21
+"""A step covers (active tiles x chunk x 64) <= ~2M (entry, pixel) pairs: small chunks when many
+tiles are active (less wasted work after pixels saturate), long ones when few are (fewer steps)."""
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 PIX = TILE * TILE
@@ -58,8 +62,14 @@ class _Chunk:
     stop: torch.Tensor      # (A, 64) pixels that finished inside this chunk
 
 
-def _chunk(means2d, conics, opacities, pair_gauss, tiles: _Tiles, rows, j, t_run, done) -> _Chunk:
-    k = torch.arange(CHUNK, device=rows.device)
+def chunk_size(active_tiles: int) -> int:
+    """Entries per tile in one step, from the number of active tiles (deterministic: forward and
+    backward sweeps must cut their lists identically)."""
+    return max(CHUNK_MIN, min(CHUNK_MAX, CHUNK_ELEMENTS // max(1, active_tiles * PIX)))
+
+
+def _chunk(means2d, conics, opacities, pair_gauss, tiles: _Tiles, rows, j, size, t_run, done) -> _Chunk:
+    k = torch.arange(size, device=rows.device)
     pos = j + k[None, :]
     inside = pos < tiles.count[rows, None]
     entries = torch.where(inside, pair_gauss[(tiles.start[rows, None] + pos).clamp(max=pair_gauss.numel() - 1)], 0)
@@ -82,12 +92,13 @@ def _chunk(means2d, conics, opacities, pair_gauss, tiles: _Tiles, rows, j, t_run
 
 
 def _sweep(tiles: _Tiles, fn) -> None:
-    """Visit every active tile's list chunk by chunk; ``fn(rows, j)`` returns a (len(rows),) done mask."""
+    """Visit every active tile's list chunk by chunk; ``fn(rows, j, size)`` returns a (len(rows),) done mask."""
     rows = torch.arange(tiles.ids.numel(), device=tiles.ids.device)
     j = 0
     while rows.numel():
-        finished = fn(rows, j)
-        j += CHUNK
+        size = chunk_size(rows.numel())
+        finished = fn(rows, j, size)
+        j += size
         rows = rows[~finished & (tiles.count[rows] > j)]
 
 
@@ -100,8 +111,8 @@ class _Composite(torch.autograd.Function):
         t_run = means2d.new_ones(a, PIX)
         done = torch.zeros(a, PIX, dtype=torch.bool, device=means2d.device)
 
-        def step(rows, j):
-            ch = _chunk(means2d, conics, opacities, bins.pair_gauss.long(), tiles, rows, j, t_run[rows], done[rows])
+        def step(rows, j, size):
+            ch = _chunk(means2d, conics, opacities, bins.pair_gauss.long(), tiles, rows, j, size, t_run[rows], done[rows])
             acc[rows] += torch.einsum("akp,akc->apc", ch.alpha * ch.t_before, colors[ch.entries])
             t_run[rows] = ch.t_after
             done[rows] |= ch.stop
@@ -130,8 +141,8 @@ class _Composite(torch.autograd.Function):
         t_run = torch.ones_like(t_final)
         done = torch.zeros_like(t_final, dtype=torch.bool)
 
-        def step(rows, j):
-            ch = _chunk(means2d, conics, opacities, pairs.long(), tiles, rows, j, t_run[rows], done[rows])
+        def step(rows, j, size):
+            ch = _chunk(means2d, conics, opacities, pairs.long(), tiles, rows, j, size, t_run[rows], done[rows])
             g = g_img[rows]
             gc = torch.einsum("apc,akc->akp", g, colors[ch.entries])          # g . c_i per pixel
             w = ch.alpha * ch.t_before
