@@ -19,20 +19,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from gt2gs_blender.core.ply import read_ply, write_ply  # noqa: E402
-from gt2gs_blender.core.scene import GaussianScene  # noqa: E402
-
-
-def random_scene(n: int, degree: int = 3, seed: int = 0) -> GaussianScene:
-    """A random SH-``degree`` scene with normals, as the INRIA trainer writes it."""
-    g = torch.Generator().manual_seed(seed)
-    k = (degree + 1) ** 2 - 1
-    normals = np.zeros(n, np.float32)
-    return GaussianScene(
-        means=torch.randn(n, 3, generator=g), quats=torch.randn(n, 4, generator=g),
-        log_scales=torch.randn(n, 3, generator=g) - 4, opacity_logits=torch.randn(n, generator=g),
-        sh_dc=torch.randn(n, 3, generator=g), sh_rest=torch.randn(n, k, 3, generator=g) * 0.1,
-        extras={"nx": normals, "ny": normals.copy(), "nz": normals.copy()},
-    )
+from common import random_scene  # noqa: E402
 
 
 def best_ms(fn, repeats: int) -> float:

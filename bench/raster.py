@@ -54,7 +54,6 @@ def rss_mib() -> float:
 
 def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
     """Measure one configuration in this process (called in a subprocess)."""
-    import torch
 
     from gt2gs_blender.core.rasterizer import rasterization
 

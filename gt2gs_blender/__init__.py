@@ -5,19 +5,20 @@ package (and its bpy-free ``core``) also imports in plain Python for the API, CL
 """
 from __future__ import annotations
 
-_registered: list = []
+_group = None
 
 
 def register() -> None:
     """Register the extension's Blender classes (called by Blender when the extension is enabled)."""
+    global _group
     from . import operators, panels
+    from .blender.registration import ModuleGroup
 
-    for module in (operators, panels):
-        module.register()
-        _registered.append(module)
+    _group = ModuleGroup((operators, panels))
+    _group.register()
 
 
 def unregister() -> None:
     """Unregister everything register() registered, in reverse order."""
-    while _registered:
-        _registered.pop().unregister()
+    if _group is not None:
+        _group.unregister()

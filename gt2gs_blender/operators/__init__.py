@@ -4,22 +4,9 @@ Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (bot
 """
 from __future__ import annotations
 
+from ..blender.registration import ModuleGroup
 from . import io_export, io_import
 
-modules = (io_import, io_export)
-_registered: list = []
-
-
-def register() -> None:
-    try:
-        for module in modules:
-            module.register()
-            _registered.append(module)
-    except BaseException:
-        unregister()
-        raise
-
-
-def unregister() -> None:
-    while _registered:
-        _registered.pop().unregister()
+_group = ModuleGroup((io_import, io_export))
+register = _group.register
+unregister = _group.unregister

@@ -1,22 +1,9 @@
 """Blender UI: the GT² tab in the 3D View sidebar."""
 from __future__ import annotations
 
+from ..blender.registration import ModuleGroup
 from . import sidebar
 
-modules = (sidebar,)
-_registered: list = []
-
-
-def register() -> None:
-    try:
-        for module in modules:
-            module.register()
-            _registered.append(module)
-    except BaseException:
-        unregister()
-        raise
-
-
-def unregister() -> None:
-    while _registered:
-        _registered.pop().unregister()
+_group = ModuleGroup((sidebar,))
+register = _group.register
+unregister = _group.unregister
