@@ -313,14 +313,12 @@ def splat_summary(obj) -> SplatSummary | None:
 
 
 def object_to_scene(obj, *, bake_transform: bool = False):
-    """The object's Gaussians as a core ``GaussianScene``, and notes for the user.
+    """The object's Gaussians as core ``SplatArrays`` (numpy; no torch needed), and notes for the user.
 
     With ``bake_transform`` the object's world matrix is baked into the Gaussians (see ``transform``);
     otherwise they stay in the object's local space, exactly as stored.
     """
-    import torch
-
-    from ..core.scene import GaussianScene
+    from ..core.ply import SplatArrays
 
     if not is_splat_object(obj):
         raise SplatObjectError(f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "
@@ -376,13 +374,13 @@ def object_to_scene(obj, *, bake_transform: bool = False):
                     extras[p] = np.ascontiguousarray(baked.normals[:, i], extras[p].dtype)
             notes.extend(baked.notes)
 
-    scene = GaussianScene(
-        means=torch.from_numpy(np.ascontiguousarray(means)),
-        quats=torch.from_numpy(quats),
-        log_scales=torch.from_numpy(log_scales),
-        opacity_logits=torch.from_numpy(opacity),
-        sh_dc=torch.from_numpy(sh_dc),
-        sh_rest=torch.from_numpy(sh_rest),
+    scene = SplatArrays(
+        means=np.ascontiguousarray(means),
+        quats=quats,
+        log_scales=log_scales,
+        opacity_logits=opacity,
+        sh_dc=sh_dc,
+        sh_rest=sh_rest,
         extras=extras,
         ply_layout=tuple((p, t) for p, t in layout) if layout is not None else None,
     )

@@ -16,6 +16,9 @@ Choices:
 - Only the Gaussian parameters are checked for NaN/Inf; extras are opaque and kept as they are.
 - Every problem with the file raises ``PlyFormatError`` naming the file; a scene that cannot be
   written (bad extras, unknown format) is a caller bug and raises ``ValueError``.
+- This module needs numpy only: ``read_ply_arrays`` returns ``SplatArrays`` (the numpy twin of
+  ``GaussianScene``) and ``write_ply`` takes either, so Blender can import and export splats before
+  the engine's torch dependency is installed. ``read_ply`` returns torch tensors.
 """
 from __future__ import annotations
 
@@ -26,14 +29,14 @@ import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import BinaryIO, Iterable
+from typing import TYPE_CHECKING, BinaryIO, Iterable
 
 import numpy as np
-import torch
-
 from .atomic import atomic_write
 from .errors import PlyFormatError
-from .scene import GaussianScene, sh_coeff_count
+
+if TYPE_CHECKING:
+    from .scene import GaussianScene
 
 PathLike = str | os.PathLike
 
@@ -106,8 +109,41 @@ def read_ply_header(path: PathLike) -> PlyHeader:
         return _parse_header(path, _read(path, f, HEADER_LIMIT))
 
 
+@dataclass
+class SplatArrays:
+    """The numpy twin of ``GaussianScene``: the same field names, shapes and meaning, float32 arrays."""
+
+    means: np.ndarray
+    quats: np.ndarray
+    log_scales: np.ndarray
+    opacity_logits: np.ndarray
+    sh_dc: np.ndarray
+    sh_rest: np.ndarray
+    extras: dict[str, np.ndarray]
+    ply_layout: tuple[tuple[str, str], ...] | None = None
+
+    def __len__(self) -> int:
+        return int(self.means.shape[0])
+
+    def tensors(self) -> dict[str, np.ndarray]:
+        """The parameter arrays by name (the keys of ``GaussianScene.tensors()``)."""
+        return {"means": self.means, "quats": self.quats, "log_scales": self.log_scales,
+                "opacity_logits": self.opacity_logits, "sh_dc": self.sh_dc, "sh_rest": self.sh_rest}
+
+
 def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
-    """Load a 3DGS PLY as float32 tensors.
+    """Load a 3DGS PLY as a ``GaussianScene`` of float32 tensors (see ``read_ply_arrays``)."""
+    import torch
+
+    from .scene import GaussianScene
+
+    arrays = read_ply_arrays(path, drop_invalid=drop_invalid)
+    return GaussianScene(**{key: torch.from_numpy(values) for key, values in arrays.tensors().items()},
+                         extras=arrays.extras, ply_layout=arrays.ply_layout)
+
+
+def read_ply_arrays(path: PathLike, *, drop_invalid: bool = False) -> SplatArrays:
+    """Load a 3DGS PLY as numpy arrays.
 
     Gaussians with NaN/Inf parameters make the file an error unless ``drop_invalid``, which drops
     them with a warning.
@@ -120,7 +156,7 @@ def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
             records = _ascii_vertices(path, _read(path, f, -1), header)
         else:
             records = _binary_vertices(path, f, header)
-    return _scene_from_records(path, header, records, k, drop_invalid)
+    return _arrays_from_records(path, header, records, k, drop_invalid)
 
 
 def _open(path: PathLike) -> BinaryIO:
@@ -276,7 +312,7 @@ def _check_gaussian_layout(path: PathLike, header: PlyHeader) -> int:
                                    "(not a 3D Gaussian Splatting PLY?)")
     rest = [p.name for p in props if p.name.startswith("f_rest_")]
     k = len(rest) // 3
-    if len(rest) not in (3 * (sh_coeff_count(d) - 1) for d in range(4)) or \
+    if len(rest) not in (3 * ((d + 1) ** 2 - 1) for d in range(4)) or \
             set(rest) != {f"f_rest_{i}" for i in range(len(rest))}:
         raise PlyFormatError(path, f"{len(rest)} f_rest properties do not form an SH degree 0-3 layout "
                                    "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
@@ -451,9 +487,9 @@ def _read_group(records: np.ndarray, key: str, names: list[str]) -> np.ndarray:
     return out
 
 
-def _scene_from_records(
+def _arrays_from_records(
     path: PathLike, header: PlyHeader, records: np.ndarray, k: int, drop_invalid: bool,
-) -> GaussianScene:
+) -> SplatArrays:
     groups = _core_groups(k)
     with np.errstate(over="ignore"):  # double values beyond float32 become Inf, reported below
         arrays = {key: _read_group(records, key, names) for key, names in groups.items()}
@@ -471,18 +507,17 @@ def _scene_from_records(
                 path, f"{n_bad} of {len(records)} Gaussians have non-finite values (NaN or Inf) in their "
                       "parameters; use --drop-invalid (drop_invalid=True) to load the file without them")
         warnings.warn(f"{os.fspath(path)}: dropped {n_bad} of {len(records)} Gaussians with non-finite values",
-                      stacklevel=3)
+                      stacklevel=4)
         arrays = {key: values[finite] for key, values in arrays.items()}
         extras = {name: values[finite] for name, values in extras.items()}
-    return GaussianScene(**{key: torch.from_numpy(values) for key, values in arrays.items()},
-                         extras=extras, ply_layout=header.properties)
+    return SplatArrays(**arrays, extras=extras, ply_layout=header.properties)
 
 
 # -- writing ------------------------------------------------------------------------------------------
 
 
-def write_ply(path: PathLike, scene: GaussianScene, *, fmt: str = "binary_little_endian") -> None:
-    """Write ``scene`` atomically (temp file + rename); the scene is not modified."""
+def write_ply(path: PathLike, scene: GaussianScene | SplatArrays, *, fmt: str = "binary_little_endian") -> None:
+    """Write a scene (torch ``GaussianScene`` or numpy ``SplatArrays``) atomically; it is not modified."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown PLY format {fmt!r}; use one of {', '.join(FORMATS)}")
     layout = _write_layout(scene)
@@ -495,7 +530,7 @@ def write_ply(path: PathLike, scene: GaussianScene, *, fmt: str = "binary_little
     atomic_write(Path(path), (header, body))
 
 
-def _write_layout(scene: GaussianScene) -> tuple[tuple[str, str], ...]:
+def _write_layout(scene: GaussianScene | SplatArrays) -> tuple[tuple[str, str], ...]:
     """The scene's own layout if it still fits the scene, else the canonical INRIA order."""
     core = [name for names in _core_groups(int(scene.sh_rest.shape[1])).values() for name in names]
     _check_extras(scene, set(core))
@@ -513,7 +548,7 @@ def _code(dtype: np.dtype) -> str:
     return f"{dtype.kind}{dtype.itemsize}"
 
 
-def _check_extras(scene: GaussianScene, core: set[str]) -> None:
+def _check_extras(scene: GaussianScene | SplatArrays, core: set[str]) -> None:
     for name, values in scene.extras.items():
         if not isinstance(name, str) or not _PROPERTY_NAME.fullmatch(name):
             raise ValueError(f"extra property name {name!r} is not a PLY name (printable ASCII, no spaces)")
@@ -526,7 +561,7 @@ def _check_extras(scene: GaussianScene, core: set[str]) -> None:
                              f"(use one of {', '.join(_TYPE_FOR_CODE)})")
 
 
-def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene, core: set[str]) -> bool:
+def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene | SplatArrays, core: set[str]) -> bool:
     names = [name for name, _ in layout]
     if len(set(names)) != len(names) or set(names) != core | set(scene.extras):
         return False
@@ -538,16 +573,22 @@ def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene, core
     return True
 
 
-def _records(scene: GaussianScene, layout: tuple[tuple[str, str], ...], byte_order: str) -> np.ndarray:
+def _records(scene: GaussianScene | SplatArrays, layout: tuple[tuple[str, str], ...], byte_order: str) -> np.ndarray:
     """The vertex records of ``scene`` as a structured array in ``layout``."""
     records = np.empty(len(scene), _record_dtype(layout, byte_order))
     with np.errstate(over="ignore"):
         for key, names in _core_groups(int(scene.sh_rest.shape[1])).items():
-            tensor = scene.tensors()[key].detach().cpu()
-            _write_group(records, key, names, (tensor if tensor.dtype == torch.float64 else tensor.float()).numpy())
+            _write_group(records, key, names, _float_array(scene.tensors()[key]))
         for name in scene.extras:
             records[name] = scene.extras[name]
     return records
+
+
+def _float_array(values) -> np.ndarray:
+    """A torch tensor or numpy array as a float32 (or float64) numpy array."""
+    if hasattr(values, "detach"):
+        values = values.detach().cpu().numpy()
+    return values if values.dtype in (np.float32, np.float64) else values.astype(np.float32)
 
 
 def _write_group(records: np.ndarray, key: str, names: list[str], values: np.ndarray) -> None:

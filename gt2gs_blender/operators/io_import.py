@@ -51,7 +51,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             return {"CANCELLED"}
         try:
             from ..core.errors import GT2GSError
-            from ..core.ply import read_ply, read_ply_header
+            from ..core.ply import read_ply_arrays, read_ply_header
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}
@@ -74,7 +74,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
                 header = read_ply_header(path)
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
-                    scene = read_ply(path, drop_invalid=self.drop_invalid)
+                    scene = read_ply_arrays(path, drop_invalid=self.drop_invalid)
                 notes.extend(str(w.message) for w in caught)
                 created.append(splats.scene_to_object(
                     scene, object_name_for(path), collection, source_path=path, source_format=header.format,
