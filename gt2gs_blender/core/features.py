@@ -1,0 +1,245 @@
+"""VGG feature extractor: one network type, parameterised by a :class:`FeatureSpec`.
+
+The paper matches rendered and texture features of torchvision's ImageNet VGG-16 at relu3_1,
+relu3_2 and relu3_3 (768 channels), on renders downscaled x0.5 before the network. Where those
+weights do not exist (no internet, no cached copy) the normalised VGG-19 to relu3_1 is the closest
+real substitute (relu2_1 + relu3_1 by default). Both are plain ``nn.Sequential`` stacks with
+torchvision's layer indices (``features.N.weight``), so torchvision state dicts load unchanged;
+torchvision itself cannot be imported beside the torch CPU wheel used here (DESIGN section 6).
+Which weights are found, and the reported no-weights fallback, is :mod:`.weights`' business.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+if TYPE_CHECKING:
+    from .weights import ResolvedWeights
+
+IMAGENET_MEAN = (0.485, 0.456, 0.406)
+IMAGENET_STD = (0.229, 0.224, 0.225)
+PREPROCESSING = ("imagenet", "none")
+PADDING = ("zeros", "reflect")
+RENDER_SCALE = 0.5
+"""The paper's downscale of renders and content images before VGG."""
+FALLBACK_SEED = 0
+_POOL = "M"
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """What network computes the features and how its input is prepared.
+
+    ``layers`` is torchvision's VGG configuration: an int is a 3x3 conv with that many output
+    channels followed by a ReLU, ``"M"`` a 2x2 max-pool (floor mode, as torchvision). ``taps`` are
+    the ReLU outputs concatenated, in network order, into the feature map (``relu<block>_<conv>``),
+    all resized to the deepest tap's resolution. ``weight_files`` are the file names :mod:`.weights` looks for.
+    """
+
+    name: str
+    layers: tuple[int | str, ...]
+    taps: tuple[str, ...]
+    preprocessing: str
+    padding: str
+    weight_files: tuple[str, ...]
+    description: str
+
+    def __post_init__(self) -> None:
+        if self.preprocessing not in PREPROCESSING:
+            raise ValueError(f"preprocessing must be one of {PREPROCESSING}, got {self.preprocessing!r}")
+        if self.padding not in PADDING:
+            raise ValueError(f"padding must be one of {PADDING}, got {self.padding!r}")
+        unknown = [t for t in self.taps if t not in self.relu_indices]
+        if not self.taps or unknown:
+            raise ValueError(f"{self.name}: taps {unknown or '()'} not among {sorted(self.relu_indices)}")
+
+    @property
+    def stack(self) -> tuple[tuple[str, str, int, int], ...]:
+        """One (kind, name, in_channels, out_channels) per torchvision ``features`` index, all layers;
+        kind is ``conv``, ``relu`` or ``pool``; names as ``conv2_1``, ``relu2_1``, ``pool1``."""
+        out: list[tuple[str, str, int, int]] = []
+        block, conv, channels = 1, 0, 3
+        for item in self.layers:
+            if item == _POOL:
+                out.append(("pool", f"pool{block}", channels, channels))
+                block, conv = block + 1, 0
+            else:
+                conv += 1
+                out += [("conv", f"conv{block}_{conv}", channels, int(item)),
+                        ("relu", f"relu{block}_{conv}", int(item), int(item))]
+                channels = int(item)
+        return tuple(out)
+
+    @property
+    def relu_indices(self) -> dict[str, int]:
+        """``relu<block>_<conv>`` -> index of that ReLU in the ``features`` stack."""
+        return {name: i for i, (kind, name, _, _) in enumerate(self.stack) if kind == "relu"}
+
+    @property
+    def depth(self) -> int:
+        """Number of ``features`` modules up to and including the deepest tap."""
+        return max(self.relu_indices[t] for t in self.taps) + 1
+
+    @property
+    def tap_channels(self) -> dict[str, int]:
+        """Channels of each tap, in network (= concatenation) order."""
+        return {t: self.stack[self.relu_indices[t]][3] for t in sorted(self.taps, key=self.relu_indices.get)}
+
+    @property
+    def out_channels(self) -> int:
+        """Channels of the concatenated feature map."""
+        return sum(self.tap_channels.values())
+
+    @property
+    def stride(self) -> int:
+        """Network-input pixels per feature cell along each axis (2 ** pools before the deepest tap)."""
+        return 2 ** sum(kind == "pool" for kind, *_ in self.stack[: self.depth])
+
+    def parameter_shapes(self) -> dict[str, tuple[int, ...]]:
+        """State-dict keys (``features.N.weight/bias``) the network up to the deepest tap needs."""
+        out: dict[str, tuple[int, ...]] = {}
+        for index, (kind, _, c_in, c_out) in enumerate(self.stack[: self.depth]):
+            if kind == "conv":
+                out[f"features.{index}.weight"] = (c_out, c_in, 3, 3)
+                out[f"features.{index}.bias"] = (c_out,)
+        return out
+
+    def with_taps(self, *taps: str) -> FeatureSpec:
+        """The same network tapped elsewhere (e.g. ``VGG19_NORM_RELU3.with_taps("relu3_1")``)."""
+        return replace(self, taps=tuple(taps))
+
+
+VGG16_RELU3 = FeatureSpec(
+    name="vgg16_relu3",
+    layers=(64, 64, _POOL, 128, 128, _POOL, 256, 256, 256),
+    taps=("relu3_1", "relu3_2", "relu3_3"),
+    preprocessing="imagenet",
+    padding="zeros",
+    weight_files=("vgg16-397923af.pth",),
+    description="torchvision ImageNet VGG-16, relu3_1+relu3_2+relu3_3 (the paper's features)",
+)
+VGG19_NORM_RELU3 = FeatureSpec(
+    name="vgg19_norm_relu3",
+    layers=(64, 64, _POOL, 128, 128, _POOL, 256),
+    taps=("relu2_1", "relu3_1"),
+    preprocessing="none",
+    padding="reflect",
+    weight_files=("vgg19_normalised_to_relu3_1.pth",),
+    description="normalised ImageNet VGG-19, relu2_1+relu3_1 (substitute for the paper's VGG-16 relu3_x)",
+)
+SPECS = {spec.name: spec for spec in (VGG16_RELU3, VGG19_NORM_RELU3)}
+
+
+def build_layers(spec: FeatureSpec) -> nn.Sequential:
+    """The ``features`` stack of ``spec`` up to its deepest tap, torchvision indices."""
+    make = {
+        "conv": lambda c_in, c_out: nn.Conv2d(c_in, c_out, 3, padding=1, padding_mode=spec.padding),
+        "relu": lambda c_in, c_out: nn.ReLU(),
+        "pool": lambda c_in, c_out: nn.MaxPool2d(2, 2),
+    }
+    return nn.Sequential(*(make[kind](c_in, c_out) for kind, _, c_in, c_out in spec.stack[: spec.depth]))
+
+
+def random_init_(layers: nn.Sequential, seed: int = FALLBACK_SEED) -> None:
+    """Deterministic Kaiming init (torchvision's VGG init: normal, fan_out, zero bias)."""
+    generator = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for module in layers:
+            if isinstance(module, nn.Conv2d):
+                nn.init.kaiming_normal_(module.weight, mode="fan_out", nonlinearity="relu", generator=generator)
+                module.bias.zero_()
+
+
+def resize(x: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
+    """Bilinear, antialiased resize of (B,C,H,W) (a no-op at the same size)."""
+    if tuple(x.shape[-2:]) == tuple(size):
+        return x
+    return F.interpolate(x, size=size, mode="bilinear", antialias=True, align_corners=False)
+
+
+def scaled_size(height: int, width: int, scale: float) -> tuple[int, int]:
+    """Image size after scaling by ``scale``, rounded as :meth:`Camera.scaled` rounds."""
+    return max(1, round(height * scale)), max(1, round(width * scale))
+
+
+class FeatureExtractor(nn.Module):
+    """Frozen VGG features of images in [0, 1]: (B,3,H,W) -> (B,C,h,w), differentiable w.r.t. images.
+
+    ``scale`` (default the paper's 0.5) resizes the input before the network; pass ``scale=1`` to
+    ``forward`` for images that are already at the wanted size (e.g. texture crops). ``info``
+    says exactly which network and weights were loaded, and whether this is the fallback;
+    ``fingerprint`` changes whenever the spec, the scale or a parameter does (a cache key).
+    """
+
+    def __init__(self, spec: FeatureSpec, weights: ResolvedWeights, scale: float = RENDER_SCALE) -> None:
+        super().__init__()
+        self.spec = spec
+        self.scale = float(scale)
+        self.layers = build_layers(spec)
+        if weights.state_dict is None:
+            random_init_(self.layers)
+        else:
+            self._load(weights.state_dict)
+        self._tap_indices = frozenset(spec.relu_indices[t] for t in spec.taps)
+        self.register_buffer("mean", torch.tensor(IMAGENET_MEAN).reshape(1, 3, 1, 1), persistent=False)
+        self.register_buffer("std", torch.tensor(IMAGENET_STD).reshape(1, 3, 1, 1), persistent=False)
+        self.requires_grad_(False)
+        self.eval()
+        self.fingerprint = self._fingerprint()
+        self.info: dict[str, Any] = {**weights.info, "spec": spec.name, "channels": spec.out_channels,
+                                     "fingerprint": self.fingerprint}
+
+    def _fingerprint(self) -> str:
+        """Short SHA-256 of the spec, the scale and every parameter's bytes."""
+        digest = hashlib.sha256(repr((self.spec, self.scale)).encode())
+        for tensor in self.layers.state_dict().values():
+            digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+        return digest.hexdigest()[:16]
+
+    def _load(self, state_dict: Mapping[str, torch.Tensor]) -> None:
+        """Copy the spec's parameters out of ``state_dict`` (extra keys are ignored)."""
+        expected = self.spec.parameter_shapes()
+        wrong = [k for k, shape in expected.items() if k not in state_dict or tuple(state_dict[k].shape) != shape]
+        if wrong:
+            raise ValueError(f"weights lack or mis-shape {', '.join(wrong)} needed by {self.spec.name}")
+        self.layers.load_state_dict({k.removeprefix("features."): state_dict[k] for k in expected})
+
+    def forward(self, images: torch.Tensor, scale: float | None = None) -> torch.Tensor:
+        """Concatenated tap features of (B,3,H,W) images in [0, 1]."""
+        if images.dim() != 4 or images.shape[1] != 3:
+            raise ValueError(f"expected (B,3,H,W) images, got {tuple(images.shape)}")
+        x = resize(images, scaled_size(*images.shape[-2:], self.scale if scale is None else scale))
+        if self.spec.preprocessing == "imagenet":
+            x = (x - self.mean) / self.std
+        taps = []
+        for index, module in enumerate(self.layers):
+            x = module(x)
+            if index in self._tap_indices:
+                taps.append(x)
+        return torch.cat([resize(t, tuple(x.shape[-2:])) for t in taps], dim=1)
+
+
+def load_feature_extractor(
+    preference: str = "auto",
+    weights_path: str | os.PathLike | None = None,
+    device: torch.device | str = "cpu",
+    *,
+    scale: float = RENDER_SCALE,
+    allow_download: bool = False,
+) -> FeatureExtractor:
+    """Resolve weights (see :func:`.weights.resolve_weights`) and build the extractor on ``device``.
+
+    Check ``extractor.info["fallback"]``: with no weights found the network is a seeded random
+    VGG-19 and the caller must report ``info["reason"]``.
+    """
+    from .weights import resolve_weights  # weights imports this module's specs
+
+    weights = resolve_weights(preference, weights_path, allow_download=allow_download)
+    return FeatureExtractor(weights.spec, weights, scale=scale).to(device)
