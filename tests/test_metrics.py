@@ -1,0 +1,121 @@
+"""Evaluation metrics: consistency by depth warping, texture match, SSIM, FPS, memory."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from gt2gs_blender.core import metrics
+from gt2gs_blender.core.cameras import Camera
+from gt2gs_blender.core.features import VGG19_NORM_RELU3, FeatureExtractor
+from gt2gs_blender.core.lpips import load_lpips
+from gt2gs_blender.core.rasterizer import render
+from gt2gs_blender.core.scene import GaussianScene
+from gt2gs_blender.core.weights import ResolvedWeights
+
+from .conftest import SHARED
+
+W, H = 64, 48
+
+
+@pytest.fixture(scope="module")
+def lpips():
+    if not (SHARED / "weights").is_dir():
+        pytest.skip(f"shared weights not found at {SHARED / 'weights'}")
+    return load_lpips(SHARED / "weights")
+
+
+def still_views(count: int, step: float) -> tuple[torch.Tensor, ...]:
+    """``count`` views from one camera of a flat wall; view k is the base image brightened by k*step."""
+    g = torch.Generator().manual_seed(3)
+    base = torch.nn.functional.interpolate(torch.rand(1, 3, 6, 8, generator=g), size=(H, W), mode="bilinear")
+    base = 0.1 + 0.6 * base[0].permute(1, 2, 0)
+    images = torch.stack([base + k * step for k in range(count)])
+    cameras = [Camera(np.eye(4), 50.0, 50.0, W / 2, H / 2, W, H)] * count
+    return images, torch.full((count, H, W), 3.0), torch.ones(count, H, W), cameras
+
+
+def wall_scene(n: int = 50) -> GaussianScene:
+    """A textured, opaque wall of n x n flat Gaussians on the plane z = 3."""
+    coords = torch.linspace(-2.5, 2.5, n)
+    y, x = torch.meshgrid(coords, coords, indexing="ij")
+    means = torch.stack([x, y, torch.full_like(x, 3.0)], -1).reshape(-1, 3)
+    spacing = float(coords[1] - coords[0])
+    # little overlap, so little dependence on the per-view blending order of coplanar splats
+    scales = torch.tensor([spacing * 0.5, spacing * 0.5, 1e-3]).expand(n * n, 3)
+    colors = torch.stack([0.5 + 0.4 * torch.sin(3 * means[:, 0]), 0.5 + 0.4 * torch.cos(2 * means[:, 1]),
+                          0.5 + 0.2 * torch.sin(means[:, 0] + means[:, 1])], -1)
+    return GaussianScene.from_activated(means, scales, torch.full((n * n,), 0.98), colors)
+
+
+def sliding_cameras(count: int) -> list[Camera]:
+    """Cameras sliding sideways and turning slightly, looking at the wall."""
+    cams = []
+    for k in range(count):
+        angle = 0.02 * k
+        rot = np.array([[np.cos(angle), 0, np.sin(angle)], [0, 1, 0], [-np.sin(angle), 0, np.cos(angle)]])
+        cams.append(Camera.from_cam_to_world(rot, [0.05 * k - 0.2, 0.0, 0.0], 80.0, 80.0, W / 2, H / 2, W, H))
+    return cams
+
+
+def test_identical_views_are_perfectly_consistent(lpips):
+    images, depths, alphas, cameras = still_views(9, 0.0)
+    for offset in (1, 7):
+        scores = metrics.consistency(images, depths, alphas, cameras, offset, lpips=lpips)
+        assert scores["rmse"] < 1e-6 and abs(scores["lpips"]) < 1e-6
+
+
+def test_known_brightness_change_gives_known_rmse():
+    images, depths, alphas, cameras = still_views(9, 0.02)
+    assert metrics.consistency(images, depths, alphas, cameras, 1)["rmse"] == pytest.approx(0.02, abs=1e-6)
+    assert metrics.consistency(images, depths, alphas, cameras, 7)["rmse"] == pytest.approx(0.14, abs=1e-6)
+    assert metrics.consistency(images, depths, alphas, cameras, 9) == {"rmse": None, "lpips": None}
+
+
+def test_invalid_pixels_are_left_out():
+    images, depths, alphas, cameras = still_views(2, 0.0)
+    images[1, :, : W // 2] = 1.0  # view 1 differs only where view 0 has no coverage
+    alphas[0, :, : W // 2] = 0.0
+    assert metrics.consistency(images, depths, alphas, cameras, 1)["rmse"] < 1e-6
+
+
+def test_rendered_scene_is_consistent_and_noise_is_not(lpips):
+    scene, cameras = wall_scene(), sliding_cameras(3)
+    out = render(scene, cameras, backend="torch")
+    assert out.alphas.min() > 0.8
+    clean = metrics.consistency(out.colors, out.depths, out.alphas, cameras, 1, lpips=lpips)
+    noisy = out.colors + 0.1 * torch.randn(out.colors.shape, generator=torch.Generator().manual_seed(1))
+    dirty = metrics.consistency(noisy, out.depths, out.alphas, cameras, 1, lpips=lpips)
+    assert clean["rmse"] < 0.02 and dirty["rmse"] > 0.09
+    assert clean["lpips"] < 0.5 * dirty["lpips"]
+
+
+def test_texture_match_equals_brute_force():
+    g = torch.Generator().manual_seed(5)
+    features, bank = torch.randn(300, 16, generator=g), torch.randn(70, 16, generator=g)
+    f64, b64 = features.double(), bank.double()
+    cosine = (f64 / f64.norm(dim=1, keepdim=True)) @ (b64 / b64.norm(dim=1, keepdim=True)).T
+    expected = float((1 - cosine.max(dim=1).values).mean())
+    assert metrics.texture_match(features, bank) == pytest.approx(expected, abs=1e-6)
+    assert metrics.texture_match(features, bank, block_bytes=1000) == pytest.approx(expected, abs=1e-6)
+    assert metrics.texture_match(bank, bank) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_evaluate_assembles_every_metric(lpips):
+    scene, cameras = wall_scene(), sliding_cameras(8)
+    out = render(scene, cameras, backend="torch")
+    extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
+    bank = extractor(out.colors[:1].permute(0, 3, 1, 2)).permute(0, 2, 3, 1).reshape(-1, extractor.spec.out_channels)
+    result = metrics.evaluate(out.colors, out.colors, out.depths, out.alphas, cameras, lpips=lpips,
+                              extractor=extractor, bank_features=bank)
+    assert set(result) == {"ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match"}
+    assert result["ssim"] == pytest.approx(1.0, abs=1e-5)
+    assert result["st_rmse"] < result["lt_rmse"] < 0.05 and result["st_lpips"] is not None
+    assert 0.0 <= result["texture_match"] < 0.5
+    assert metrics.evaluate(out.colors, out.colors, out.depths, out.alphas, cameras)["texture_match"] is None
+
+
+def test_fps_and_peak_memory():
+    assert metrics.render_fps(wall_scene(10), sliding_cameras(2), backend="torch") > 0
+    memory = metrics.peak_memory_mib()
+    assert memory["rss_peak_mib"] > 10 and memory["cuda_peak_mib"] is None
