@@ -17,10 +17,10 @@ import time
 from collections.abc import Sequence
 
 import torch
-import torch.nn.functional as F
 
 from .cameras import Camera
 from .features import FeatureExtractor
+from .losses import cosine_distance, nearest_features
 from .lpips import LPIPS
 from .rasterizer import render
 from .scene import GaussianScene
@@ -79,18 +79,15 @@ def _mean(values: list[float]) -> float | None:
 
 @torch.no_grad()
 def texture_match(features: torch.Tensor, bank_features: torch.Tensor, block_bytes: int = BLOCK_BYTES) -> float:
-    """Mean over rendered features (N,C) of 1 - max cosine similarity to the bank (M,C).
+    """Mean over rendered features (N,C) of the cosine distance to the nearest bank feature (M,C).
 
-    Queries go through in blocks so that no similarity block exceeds ``block_bytes``.
+    The same nearest-feature search as the NNFM loss, in blocks of at most ``block_bytes``.
     """
     if features.dim() != 2 or bank_features.dim() != 2 or features.shape[1] != bank_features.shape[1]:
         shapes = f"{tuple(features.shape)}, {tuple(bank_features.shape)}"
         raise ValueError(f"texture_match needs (N,C) and (M,C) features, got {shapes}")
-    queries = F.normalize(features, dim=1)
-    bank = F.normalize(bank_features.to(queries.dtype), dim=1)
-    chunk = max(1, block_bytes // (bank.shape[0] * bank.element_size()))
-    best = torch.cat([(q @ bank.T).amax(dim=1) for q in queries.split(chunk)])
-    return float((1.0 - best).mean())
+    nearest = nearest_features(features, bank_features, chunk_bytes=block_bytes)
+    return float(cosine_distance(features, bank_features[nearest].to(features)).mean())
 
 
 @torch.no_grad()
