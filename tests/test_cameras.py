@@ -747,18 +747,21 @@ def sphere_points(center: np.ndarray, radius: float, n: int = 4000) -> np.ndarra
 @pytest.mark.parametrize("kind, up", [("auto", (0.0, 0.0, 1.0)), ("orbit", "auto"), ("arc", (0.0, 0.0, 1.0))])
 def test_auto_views_frame_the_donut(donut: GaussianScene, kind: str, up) -> None:
     cams = auto_views(donut, 16, width=200, height=150, kind=kind, up=up)
-    center, radius = bounds_sphere(donut)
-    sphere = sphere_points(center, radius)
+    center, _ = bounds_sphere(donut)
     assert len(cams) == 16
     assert_look_at_centre(cams, center)
     assert_neighbours_closest(cams, cyclic=kind != "arc")
+    lo, hi = (b.double().numpy() for b in donut.bounds(0.98))
+    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    fill = []
     for cam in cams:
-        uv, depth = cam.project(sphere)
+        uv, depth = cam.project(corners)
         assert np.all(depth > 0)
         assert np.all((uv >= 0) & (uv <= [cam.width, cam.height])), cam.name
-        assert np.ptp(uv[:, 1]) > 0.5 * cam.height  # and fills most of the narrower side
+        fill.append(max(np.ptp(uv[:, 0]) / cam.width, np.ptp(uv[:, 1]) / cam.height))
         (_, v0), (_, v1) = cam.project(np.stack([center, center + [0.0, 0.0, 0.01]]))[0]
         assert v1 < v0  # the donut's +z (icing side) is up in every image
+    assert min(fill) > 0.6 and max(fill) > 0.7  # the box fills every frame (it is not centred: perspective)
 
 
 def test_donut_up_axis_is_z(donut: GaussianScene) -> None:

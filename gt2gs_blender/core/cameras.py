@@ -807,15 +807,18 @@ def auto_views(
 ) -> list[Camera]:
     """Ordered views fitted to a scene when no cameras are given.
 
-    The Gaussians' robust bounds (``scene.bounds(quantile)``, ignoring floaters) give a bounding
-    sphere; the camera distance makes that sphere fill the narrower field of view up to ``margin``
-    (radius = r / sin(fov/2) * margin). ``kind``: "orbit" (a full ring), "arc" (a 60 degree
+    The Gaussians' robust bounds (``scene.bounds(quantile)``, ignoring floaters) give a box; the
+    camera distance is the smallest at which all eight box corners project inside every image,
+    times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
+    long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
     forward-facing arc on the -y side, Blender's front) or "auto" (= orbit: a lone object has no
     known front). ``up`` is a vector (world +z, Blender's convention, by default) or "auto" for
     :func:`estimate_up_axis`.
     """
     if kind not in ("auto", "orbit", "arc"):
         raise ValueError(f"kind must be 'auto', 'orbit' or 'arc', got {kind!r}")
+    if margin <= 0:
+        raise ValueError(f"margin must be positive, got {margin}")
     lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
     center = (lo + hi) / 2.0
     sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
@@ -826,7 +829,27 @@ def auto_views(
         up = estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
     fov_x = math.radians(fov_deg)
     fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
-    radius = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0) * margin
     make = arc_views if kind == "arc" else orbit_views
-    return make(center, radius, n, width=width, height=height, fov_deg=fov_deg,
-                elevation_deg=elevation_deg, up=up)
+
+    def views(radius: float) -> list[Camera]:
+        return make(center, radius, n, width=width, height=height, fov_deg=fov_deg,
+                    elevation_deg=elevation_deg, up=up)
+
+    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
+    return views(_fitting_radius(views, corners, sphere_radius, enclosing) * margin)
+
+
+def _fitting_radius(views: Callable[[float], list[Camera]], corners: np.ndarray, low: float, high: float) -> float:
+    """Smallest orbit radius in [low, high] at which every corner projects inside every view (bisection)."""
+    def inside(radius: float) -> bool:
+        for cam in views(radius):
+            uv, depth = cam.project(corners)
+            if np.any(depth <= 0) or np.any(uv < 0) or np.any(uv > [cam.width, cam.height]):
+                return False
+        return True
+
+    for _ in range(30):
+        mid = 0.5 * (low + high)
+        low, high = (low, mid) if inside(mid) else (mid, high)
+    return high
