@@ -1,0 +1,70 @@
+"""Texture-transfer settings and the named presets (what the CLI's ``--preset`` and the UI offer)."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+
+@dataclass(frozen=True)
+class TransferConfig:
+    """Every setting of a transfer run. Loss weights follow the paper's names (lambda_*)."""
+
+    resolution: int = 256            # longest image side the views are rendered at
+    n_views: int = 16                # automatic views when none are given
+    stylise_steps: int = 200         # optimisation steps of the stylisation stage
+    lr: float = 0.02                 # Adam learning rate on the DC colour coefficients
+    lambda_style: float = 1.0        # NNFM / texture loss weight
+    lambda_content: float = 0.005    # content feature MSE (paper: 0.005 LLFF, 0.0005 360 scenes)
+    lambda_tv: float = 0.02          # image total variation (paper 0.02)
+    n_scales: int = 4                # texture scales = depth groups (paper K = 4)
+    n_angles: int = 36               # rotations of the texture over 360 degrees (paper 360)
+    texture_height: int = 256        # texture height at the nearest depth group (paper 256)
+    depth_groups: bool = True        # match each feature cell only against its depth group's scale
+    color_transfer: bool = True      # ARF colour transfer before and after stylisation
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    features: str = "auto"           # feature network preference (see features.load_feature_extractor)
+    weights_path: str | None = None  # explicit weights file or folder
+    device: str = "auto"             # auto | cpu | cuda
+    backend: str = "auto"            # rasterizer backend
+    seed: int = 0
+    preview_every: int = 10          # steps between preview frames sent to the progress callback
+    evaluate: bool = True            # measure the paper's metrics at the end (report["metrics"])
+    cache_dir: str | None = None     # texture-bank cache (default: ~/.cache/gt2gs_blender/banks)
+
+    def __post_init__(self) -> None:
+        positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every")
+        for name in positive:
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if self.stylise_steps < 0 or self.lr <= 0:
+            raise ValueError(f"need stylise_steps >= 0 and lr > 0, got {self.stylise_steps}, {self.lr}")
+        if self.device not in ("auto", "cpu", "cuda"):
+            raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    def with_overrides(self, **overrides: Any) -> "TransferConfig":
+        """A copy with the given fields changed (None values are ignored: 'not given')."""
+        known = {f.name for f in fields(self)}
+        unknown = set(overrides) - known
+        if unknown:
+            raise ValueError(f"unknown transfer settings: {', '.join(sorted(unknown))}")
+        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+PRESETS: dict[str, TransferConfig] = {
+    "preview": TransferConfig(resolution=128, n_views=8, stylise_steps=40, n_scales=2, n_angles=8,
+                              texture_height=128, evaluate=False, preview_every=5),
+    "fast": TransferConfig(),
+    "balanced": TransferConfig(resolution=384, n_views=24, stylise_steps=600, n_angles=72),
+}
+"""``preview`` gives a first look in seconds, ``fast`` a usable result in minutes on a CPU,
+``balanced`` more views, resolution and texture orientations."""
+
+
+def preset(name: str, **overrides: Any) -> TransferConfig:
+    """The named preset with optional overrides."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return PRESETS[name].with_overrides(**overrides)
