@@ -1,10 +1,13 @@
 """Shared pytest fixtures: where ../shared is, and a deterministic torch set-up."""
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
-import pytest
-import torch
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # as gt2gs_blender.core sets it: before torch loads
+
+import pytest  # noqa: E402
+import torch  # noqa: E402
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 
