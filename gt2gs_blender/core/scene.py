@@ -165,9 +165,8 @@ class GaussianScene:
             t_index = torch.from_numpy(index).to(self.device)
         else:
             np_index = t_index = index
-        out = self.map_tensors(lambda t: t[t_index])
-        out.extras = {k: v[np_index] for k, v in self.extras.items()}
-        return out
+        return replace(self, **{k: v[t_index] for k, v in self.tensors().items()},
+                       extras={k: v[np_index] for k, v in self.extras.items()})
 
     def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> "GaussianScene":
         """Move (and optionally cast floating) tensors; extras stay numpy."""
