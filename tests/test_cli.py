@@ -15,6 +15,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import torch
 
 from gt2gs_blender.core import cli
 from gt2gs_blender.core.cameras import auto_views, load_cameras_json, save_cameras_json
@@ -206,21 +207,49 @@ def test_usage_errors_exit_2(capsys):
 # -- demo -------------------------------------------------------------------------------------------
 
 
+DEMO_FAST = ("--steps", "3", "--resolution", "48", "--views", "3", "--preset", "preview")
+
+
 def test_demo_on_a_given_scene(capsys, small_ply, tmp_path):
     out_dir = tmp_path / "demo"
-    code, out, err = run(capsys, "demo", "--scene", str(small_ply), "--size", "48", "--out", str(out_dir))
+    code, out, err = run(capsys, "demo", "--scene", str(small_ply), "--out", str(out_dir), *DEMO_FAST)
     assert code == 0, err
-    views = sorted(out_dir.glob("view_*.png"))
-    assert len(views) == 8 and all(foreground_fraction(v) > 0.05 for v in views)
-    sheet = read_png(out_dir / "contact_sheet.png")
-    assert sheet.shape == (2 * 48, 4 * 48, 3)
-    np.testing.assert_array_equal(sheet[48:, 48:96], read_png(views[5]))
-    assert str(out_dir / "contact_sheet.png") in out
+    stylised = read_ply(out_dir / "stylised.ply")
+    original = read_ply(small_ply)
+    assert len(stylised) == len(original) and torch.equal(stylised.means, original.means)
+    assert not torch.allclose(stylised.sh_dc, original.sh_dc)
+    report = json.loads((out_dir / "report.json").read_text())
+    assert report["n_gaussians"] == len(original) and report["n_views"] == 3
+    strip = read_png(out_dir / "before_after.png")
+    assert strip.shape == (2 * 256, 5 * 256, 3)
+    assert str(out_dir / "before_after.png") in out
 
 
 def test_demo_generates_a_torus_without_shared(capsys, tmp_path, monkeypatch):
     monkeypatch.setattr(cli, "SHARED_DONUT", tmp_path / "absent.ply")
-    code, out, err = run(capsys, "demo", "--size", "32", "--views", "3", "--out", str(tmp_path / "d"))
+    monkeypatch.setattr(cli.transfer_cmd, "DEMO_TEXTURE", tmp_path / "absent.jpg")
+    code, out, err = run(capsys, "demo", "--out", str(tmp_path / "d"), *DEMO_FAST)
     assert code == 0, err
-    assert "generated torus" in out
-    assert read_png(tmp_path / "d" / "contact_sheet.png").shape == (32, 96, 3)
+    assert "generated torus" in out and "generated stripes" in out
+    assert (tmp_path / "d" / "stylised.ply").is_file()
+
+
+def test_transfer_command_writes_scene_report_and_strip(capsys, small_ply, tmp_path, shared):
+    out = tmp_path / "out.ply"
+    texture = shared / "data" / "textures" / "brick_wall.jpg"
+    code, stdout, err = run(capsys, "transfer", str(small_ply), str(texture), "-o", str(out), *DEMO_FAST,
+                            "--report", str(tmp_path / "r.json"), "--strip", str(tmp_path / "s.png"))
+    assert code == 0, err
+    assert len(read_ply(out)) == 1200
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["weights"]["fallback"] is False  # the shared VGG-19 weights were found
+    assert read_png(tmp_path / "s.png").shape == (512, 1280, 3)
+
+
+def test_transfer_command_bad_texture_is_one_line(capsys, small_ply, tmp_path):
+    bad = tmp_path / "texture.png"
+    bad.write_bytes(b"not an image")
+    code, _, err = run(capsys, "transfer", str(small_ply), str(bad), "-o", str(tmp_path / "o.ply"), *DEMO_FAST)
+    assert code == 2
+    assert_one_line_error(err, str(bad))
+    assert not (tmp_path / "o.ply").exists()

@@ -27,9 +27,12 @@ import torch
 from .cameras import Camera, auto_views, load_views, save_cameras_json
 from .errors import GT2GSError
 from .fit import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, TextProgress, fit_llff
-from .ply import read_ply, read_ply_header
+from .atomic import atomic_write
+from .ply import read_ply, read_ply_header, write_ply
+from .texture import load_texture
 from .rasterizer import BACKENDS, render, resolve_backend
 from .scene import GaussianScene
+from . import transfer_cmd
 
 PROG = "gt2gs"
 EXIT_INTERNAL, EXIT_USER = 1, 2
@@ -76,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_render(commands, debug)
     _add_demo(commands, debug)
     _add_fit(commands, debug)
+    _add_transfer(commands, debug)
     return parser
 
 
@@ -183,15 +187,32 @@ def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
 def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "demo", parents=[debug, _scene_options(), _render_options()],
-        help="render the demo scene from a ring of views (what `make demo` runs)",
-        description="Render the shared donut scene (or a generated torus when ../shared is absent) "
-                    "from a ring of views, and tile them into a contact sheet.")
+        help="texture-transfer the demo scene (what `make demo` runs)",
+        description="Re-texture the shared donut scene with a shared texture (or a generated torus and "
+                    "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "
+                    "DIR/report.json.")
     p.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
                    help="output folder (default: out/demo)")
-    p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="render this scene instead of the donut")
-    p.add_argument("--size", type=_positive_int, default=384, metavar="PX", help="view size in pixels (default: 384)")
-    p.add_argument("--views", type=_positive_int, default=8, metavar="N", help="number of views (default: 8)")
+    p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="use this scene instead of the donut")
+    p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
+    p.add_argument("--views", type=_positive_int, metavar="N", help="number of automatic views (default: the preset's)")
+    transfer_cmd.add_transfer_arguments(p)
     p.set_defaults(run=cmd_demo)
+
+
+def _add_transfer(commands: Any, debug: argparse.ArgumentParser) -> None:
+    p = commands.add_parser(
+        "transfer", parents=[debug, _scene_options(), _render_options()],
+        help="re-texture a 3DGS .ply with a texture photo (GT²-GS)",
+        description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
+                    "writes the stylised scene to OUT.ply.")
+    p.add_argument("scene", type=Path, metavar="SCENE.ply")
+    p.add_argument("texture", type=Path, metavar="TEXTURE")
+    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUT.ply", help="the stylised scene")
+    transfer_cmd.add_view_arguments(p)
+    transfer_cmd.add_transfer_arguments(p)
+    p.add_argument("--strip", type=Path, metavar="PNG", help="also write a before/after picture")
+    p.set_defaults(run=transfer_cmd.cmd_transfer)
 
 
 def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
@@ -456,18 +477,26 @@ class _Progress:
 
 
 def cmd_demo(args: argparse.Namespace) -> None:
-    """Render the demo scene from a ring of views and tile them into a contact sheet."""
+    """Texture-transfer the demo scene and write the stylised PLY, a before/after strip and the report."""
     scene, source = _demo_scene(args.scene, args.drop_invalid)
+    texture = args.texture or (transfer_cmd.DEMO_TEXTURE if transfer_cmd.DEMO_TEXTURE.is_file() else None)
     print(f"scene: {source} ({len(scene):,} Gaussians)")
-    # Looking down 30 degrees shows the top of a lying object; margin 0.8 frames a flat object tighter than
-    # its bounding sphere (the bounds' half diagonal) would, without cropping it.
-    cameras = auto_views(scene, args.views, width=args.size, height=args.size, elevation_deg=30.0, margin=0.8)
-    report = render_to_dir(scene, cameras, args.out, background=args.background, backend=args.backend,
-                           device=args.device)
-    print(_summary(report, cameras, args.out))
-    sheet = args.out / "contact_sheet.png"
-    write_contact_sheet(report.images, sheet, args.background)
-    print(f"contact sheet: {sheet}")
+    print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
+    image = stripes_texture() if texture is None else load_texture(texture)
+    result = transfer_cmd.run_with_progress(scene, image, None, transfer_cmd.config_from_args(args))
+    args.out.mkdir(parents=True, exist_ok=True)
+    write_ply(args.out / "stylised.ply", result.scene)
+    atomic_write(args.out / "report.json", json.dumps(result.report, indent=1, default=str))
+    transfer_cmd.write_before_after(args.out / "before_after.png", scene, result.scene, image)
+    print(transfer_cmd.summary(result.report))
+    print(f"wrote {args.out / 'stylised.ply'}, {args.out / 'before_after.png'} and {args.out / 'report.json'}")
+
+
+def stripes_texture(size: int = 256, period: int = 24) -> np.ndarray:
+    """A generated two-colour diagonal stripe texture (the demo's texture when ../shared is absent)."""
+    y, x = np.mgrid[0:size, 0:size]
+    band = (((x + y) // (period // 2)) % 2).astype(np.float32)[..., None]
+    return band * np.array([0.85, 0.35, 0.1], np.float32) + (1 - band) * np.array([0.95, 0.9, 0.75], np.float32)
 
 
 def _demo_scene(path: Path | None, drop_invalid: bool) -> tuple[GaussianScene, str]:
@@ -493,23 +522,6 @@ def torus_scene(n_major: int = 200, n_minor: int = 100, major: float = 1.0, mino
     colors = hue * (0.55 + 0.45 * checker[:, None])
     n = len(uu)
     return GaussianScene.from_activated(means, torch.full((n, 3), 0.6 * spacing), torch.full((n,), 0.9), colors)
-
-
-def write_contact_sheet(images: Sequence[Path], path: Path, background: Sequence[float], columns: int = 4) -> None:
-    """Tile equally sized PNGs row by row (at most ``columns`` per row) into one PNG."""
-    tiles = [cv2.imdecode(np.fromfile(p, np.uint8), cv2.IMREAD_COLOR) for p in images]
-    if not tiles or any(t is None or t.shape != tiles[0].shape for t in tiles):
-        raise OSError(f"{path}: the contact sheet needs readable renders of one size")
-    cols = min(columns, len(tiles))
-    rows = math.ceil(len(tiles) / cols)
-    h, w = tiles[0].shape[:2]
-    fill = np.round(np.asarray(background[::-1], dtype=np.float64) * 255).astype(np.uint8)
-    sheet = np.empty((rows * h, cols * w, 3), np.uint8)
-    sheet[:] = fill
-    for k, tile in enumerate(tiles):
-        r, c = divmod(k, cols)
-        sheet[r * h:(r + 1) * h, c * w:(c + 1) * w] = tile
-    _write_png(path, sheet)
 
 
 # -- fit --------------------------------------------------------------------------------------------

@@ -289,7 +289,7 @@ def _evaluate(original: GaussianScene, start: GaussianScene, result: GaussianSce
     stylised = render_views(result, cams, bg, config.backend)
     start_views = render_views(start, cams, bg, config.backend)
     try:
-        lpips = load_lpips(device=bg.device)
+        lpips = load_lpips(_weights_folder(config.weights_path), device=bg.device)
     except GT2GSError:
         lpips = None  # LPIPS weights not found: the lpips fields are reported as None
     images = torch.stack([stylised.composited(v) for v in range(len(cams))])
@@ -300,6 +300,13 @@ def _evaluate(original: GaussianScene, start: GaussianScene, result: GaussianSce
                                 for v in range(len(cams))])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
+
+
+def _weights_folder(path: str | None) -> str | None:
+    """The folder to look for the LPIPS weights in: the configured weights folder (or a file's folder)."""
+    if path is None:
+        return None
+    return path if os.path.isdir(path) else os.path.dirname(path) or None
 
 
 def _report(config: TransferConfig, tracker: _Tracker, scene: GaussianScene, cameras: Sequence[Camera],

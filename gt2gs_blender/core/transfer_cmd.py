@@ -1,0 +1,162 @@
+"""The ``transfer`` and ``demo`` commands of the command line: run a texture transfer with a progress
+bar, write the stylised PLY, the report and a before/after strip."""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import cv2
+import numpy as np
+import torch
+
+from .atomic import atomic_write
+from .cameras import Camera, auto_views, load_llff, load_views
+from .config import PRESETS, TransferConfig, preset
+from .ply import read_ply, write_ply
+from .rasterizer import render
+from .scene import GaussianScene
+from .texture import load_texture
+from .transfer import Progress, TransferResult, transfer
+
+SHARED = Path(__file__).resolve().parents[2].parent / "shared"
+DEMO_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
+STRIP_VIEWS = 4
+STRIP_SIZE = 256
+
+
+def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
+    """Options shared by ``transfer`` and ``demo``: the preset and its overrides."""
+    p.add_argument("--preset", choices=tuple(PRESETS), default="fast", help="settings preset (default: fast)")
+    p.add_argument("--steps", type=int, metavar="N", help="stylisation steps (default: the preset's)")
+    p.add_argument("--resolution", type=int, metavar="PX", help="longest side of the working views")
+    p.add_argument("--seed", type=int, help="random seed (default: 0)")
+    p.add_argument("--weights", type=Path, metavar="PATH", help="VGG weights file or folder (see README)")
+    p.add_argument("--no-color-transfer", dest="color_transfer", action="store_false", default=None,
+                   help="skip the colour transfer before and after stylisation")
+    p.add_argument("--no-depth-groups", dest="depth_groups", action="store_false", default=None,
+                   help="match every feature against all texture scales, not its depth group's")
+    p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
+
+
+def add_view_arguments(p: argparse.ArgumentParser) -> None:
+    views = p.add_mutually_exclusive_group()
+    views.add_argument("--cameras", type=Path, metavar="FILE_OR_DIR",
+                       help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one")
+    views.add_argument("--llff", type=Path, metavar="DIR", help="an LLFF capture folder (poses_bounds.npy)")
+    views.add_argument("--views", type=int, metavar="N", help="N automatic views around the scene")
+
+
+def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
+    """The preset with the command line's overrides (options not given keep the preset's value)."""
+    weights = args.weights if args.weights is not None else os.environ.get("GT2GS_WEIGHTS_DIR") or _shared_weights()
+    return preset(
+        args.preset, stylise_steps=args.steps, resolution=args.resolution, seed=args.seed,
+        weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
+        depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
+        device=args.device, n_views=getattr(args, "views", None), **extra,
+    )
+
+
+def _shared_weights() -> Path | None:
+    """The project's shared weights folder when it sits beside the checkout (development and CI)."""
+    folder = SHARED / "weights"
+    return folder if folder.is_dir() else None
+
+
+def _views(args: argparse.Namespace) -> list[Camera] | None:
+    if args.cameras is not None:
+        return load_views(args.cameras)
+    if args.llff is not None:
+        return load_llff(args.llff).cameras
+    return None
+
+
+def cmd_transfer(args: argparse.Namespace) -> None:
+    """Re-texture a scene, write the stylised PLY (and report, strip), print a summary."""
+    scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
+    texture = load_texture(args.texture)  # inputs are checked before any work starts
+    result = run_with_progress(scene, texture, _views(args), config_from_args(args))
+    write_ply(args.output, result.scene)
+    print(f"stylised scene: {args.output}")
+    _write_outputs(args.report, args.strip, scene, result, texture)
+    print(summary(result.report))
+
+
+def _write_outputs(report: Path | None, strip: Path | None, original: GaussianScene, result: TransferResult,
+                   texture: np.ndarray) -> None:
+    if report is not None:
+        atomic_write(report, json.dumps(result.report, indent=1, default=str))
+        print(f"report: {report}")
+    if strip is not None:
+        write_before_after(strip, original, result.scene, texture)
+        print(f"before/after: {strip}")
+
+
+def run_with_progress(scene: GaussianScene, texture: np.ndarray, views: Sequence[Camera] | None,
+                      config: TransferConfig) -> TransferResult:
+    """``transfer`` with a progress bar on stderr (a redrawn bar on a terminal, else a line per stage)."""
+    bar = ProgressBar(sys.stderr)
+    try:
+        return transfer(scene, texture, views, config, progress=bar)
+    finally:
+        bar.close()
+
+
+class ProgressBar:
+    """Renders transfer progress: ``[#####.....]  52% stylise 104/200  ETA 0:41``."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+        self.tty = stream.isatty()
+        self.stage = None
+        self.last = 0.0
+
+    def __call__(self, p: Progress) -> None:
+        if self.tty:
+            filled = int(30 * p.fraction)
+            eta = "" if p.eta_s is None else f"  ETA {int(p.eta_s) // 60}:{int(p.eta_s) % 60:02d}"
+            self.stream.write(f"\r[{'#' * filled}{'.' * (30 - filled)}] {p.fraction:4.0%} {p.stage} "
+                              f"{p.step}/{p.total}{eta}   ")
+        elif p.stage != self.stage or time.monotonic() - self.last > 30:
+            self.stream.write(f"{p.fraction:4.0%} {p.message}\n")
+            self.last = time.monotonic()
+        self.stage = p.stage
+        self.stream.flush()
+
+    def close(self) -> None:
+        if self.tty:
+            self.stream.write("\n")
+
+
+def summary(report: dict) -> str:
+    """A few lines: time per stage, the feature network (and a loud note on the fallback), the metrics."""
+    stages = ", ".join(f"{k} {v:.1f}s" for k, v in report["stage_seconds"].items())
+    lines = [f"done in {report['seconds']:.1f}s ({stages}); {report['n_gaussians']:,} Gaussians, "
+             f"{report['n_views']} views at {report['image_size'][0]}x{report['image_size'][1]}"]
+    weights = report["weights"]
+    lines.append(("WARNING, fallback features: " if weights["fallback"] else "features: ") + weights["reason"])
+    metrics = report.get("metrics")
+    if metrics:
+        lines.append("metrics: " + ", ".join(f"{k} {v:.4f}" for k, v in metrics.items() if v is not None))
+    return "\n".join(lines)
+
+
+@torch.no_grad()
+def write_before_after(path: Path, original: GaussianScene, stylised: GaussianScene, texture: np.ndarray) -> None:
+    """A PNG: the texture, then the original (top) and stylised (bottom) scene from 4 views."""
+    cams = auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0)
+    rows = [render(s, cams, background=(1.0, 1.0, 1.0)).colors.clamp(0, 1) for s in (original, stylised)]
+    tiles = [torch.cat(list(r), dim=1) for r in rows]
+    swatch = torch.from_numpy(cv2.resize(texture, (STRIP_SIZE, STRIP_SIZE), interpolation=cv2.INTER_AREA))
+    white = torch.ones_like(swatch)
+    image = torch.cat([torch.cat([swatch, tiles[0]], 1), torch.cat([white, tiles[1]], 1)], 0)
+    bgr = (image.numpy()[..., ::-1] * 255 + 0.5).astype(np.uint8)
+    ok, data = cv2.imencode(".png", bgr)
+    if not ok:
+        raise OSError(f"{path}: could not encode the PNG")
+    atomic_write(path, data.tobytes())
