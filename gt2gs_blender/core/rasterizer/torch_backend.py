@@ -14,10 +14,10 @@ import torch
 from .binning import TileBins, bin_entries_torch
 from .projection import ALPHA_MIN, TILE, Projection, tile_grid
 
-CHUNK_MIN = 16
+CHUNK_MIN = 4
 CHUNK_MAX = 1024
-CHUNK_ELEMENTS = 1 << 21
-"""A step covers (active tiles x chunk x 64) <= ~2M (entry, pixel) pairs: small chunks when many
+CHUNK_ELEMENTS = 1 << 20
+"""A step covers (active tiles x chunk x 64) <= ~1M (entry, pixel) pairs: short chunks when many
 tiles are active (less wasted work after pixels saturate), long ones when few are (fewer steps)."""
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
