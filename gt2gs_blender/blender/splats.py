@@ -20,6 +20,7 @@ Nothing here loops over points in Python.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 from dataclasses import dataclass
@@ -132,10 +133,8 @@ def scene_to_object(
         cloud = obj.data
         created.append(cloud)
         created.remove(mesh)
-        try:
+        with contextlib.suppress(ReferenceError):  # the conversion may already have freed it
             bpy.data.meshes.remove(mesh)  # left without users by the conversion
-        except ReferenceError:
-            pass
         if cloud.name != name:
             cloud.name = name
         set_meta(cloud, layout=layout, fmt=source_format, source=source_path)
@@ -492,12 +491,11 @@ def _code(dtype: np.dtype) -> str:
 
 
 def _remove_ids(ids: list) -> None:
+    """Best-effort removal of datablocks a failed import created (some may already be gone)."""
     for block in reversed(ids):
-        try:
+        with contextlib.suppress(KeyError, ReferenceError, RuntimeError):
             collection = {
                 bpy.types.Object: bpy.data.objects, bpy.types.Mesh: bpy.data.meshes,
                 bpy.types.PointCloud: bpy.data.pointclouds, bpy.types.Material: bpy.data.materials,
             }[type(block)]
             collection.remove(block)
-        except (KeyError, ReferenceError, RuntimeError):
-            pass
