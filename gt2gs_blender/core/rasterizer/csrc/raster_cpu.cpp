@@ -196,7 +196,7 @@ torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& c
     std::vector<Splat<T>> splats;
     std::vector<T> local;  // per-pair gradient records of the current tile
     T* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * M * stride;
-#pragma omp for schedule(dynamic, 2)
+#pragma omp for schedule(static, 2)  // fixed tile -> thread map: gradient sums are reproducible
     for (int64_t tile = 0; tile < n_tiles; ++tile) {
       const int64_t begin = off[tile], end = off[tile + 1];
       if (begin == end) continue;
