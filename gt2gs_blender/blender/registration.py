@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 from types import ModuleType
-from typing import Sequence
+from typing import Callable, Sequence
 
 
 class ModuleGroup:
@@ -24,3 +24,25 @@ class ModuleGroup:
     def unregister(self) -> None:
         while self._registered:
             self._registered.pop().unregister()
+
+
+class ClassesWithMenu:
+    """Blender classes plus one menu entry (a draw function appended to a menu type), registered
+    together and removed in reverse; ``menu`` is the name of a ``bpy.types`` menu, resolved at register."""
+
+    def __init__(self, classes: Sequence[type], menu: str, draw: Callable) -> None:
+        self.classes, self.menu, self.draw = tuple(classes), menu, draw
+
+    def register(self) -> None:
+        import bpy
+
+        for cls in self.classes:
+            bpy.utils.register_class(cls)
+        getattr(bpy.types, self.menu).append(self.draw)
+
+    def unregister(self) -> None:
+        import bpy
+
+        getattr(bpy.types, self.menu).remove(self.draw)
+        for cls in reversed(self.classes):
+            bpy.utils.unregister_class(cls)

@@ -264,14 +264,13 @@ def transfer(
     tracker.end()
 
     tracker.begin("stylise")
-    start = work
     work = stylise(work, content, bank, extractor, targets, config, tracker)
     tracker.end()
 
     tracker.begin("finish")
     if config.color_transfer:
         work = apply_color_transfer(work, render_views(work, cameras, background, config.backend), image)
-    metrics = _evaluate(original, start, work, content, bank, extractor, config) if config.evaluate else None
+    metrics = _evaluate(work, content, targets, bank, extractor, config) if config.evaluate else None
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     tracker.tell(1, 1, "done")
@@ -279,15 +278,15 @@ def transfer(
 
 
 @torch.no_grad()
-def _evaluate(original: GaussianScene, start: GaussianScene, result: GaussianScene, content: ViewSet,
-              bank: TextureBank, extractor: FeatureExtractor, config: TransferConfig) -> dict:
-    """The paper's metrics on the run's views, and texture match of the colour-transferred start."""
+def _evaluate(result: GaussianScene, content: ViewSet, targets: StyleTargets, bank: TextureBank,
+              extractor: FeatureExtractor, config: TransferConfig) -> dict:
+    """The paper's metrics on the run's views, and texture match of the colour-transferred start
+    (whose features are the content targets already computed)."""
     from .lpips import load_lpips
     from .metrics import evaluate, texture_match
 
     bg, cams = content.background, content.cameras
     stylised = render_views(result, cams, bg, config.backend)
-    start_views = render_views(start, cams, bg, config.backend)
     try:
         lpips = load_lpips(_weights_folder(config.weights_path), device=bg.device)
     except GT2GSError:
@@ -296,8 +295,7 @@ def _evaluate(original: GaussianScene, start: GaussianScene, result: GaussianSce
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
                        lpips=lpips, extractor=extractor, bank_features=bank.features)
-    start_features = torch.cat([extractor(_to_nchw(start_views.composited(v)))[0].flatten(1).T
-                                for v in range(len(cams))])
+    start_features = torch.cat([f[0].flatten(1).T for f in targets.content_features])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 

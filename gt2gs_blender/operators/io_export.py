@@ -8,6 +8,7 @@ from bpy.props import BoolProperty, EnumProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper
 
 from ..blender import splats
+from ..blender.registration import ClassesWithMenu
 from .io_import import engine_missing_message
 
 FORMATS = {
@@ -99,16 +100,6 @@ def menu_func_export(self, context):
     self.layout.operator(GT2GS_OT_export_ply.bl_idname, text="Gaussian Splat (.ply)")
 
 
-classes = (GT2GS_OT_export_ply,)
-
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-    bpy.types.TOPBAR_MT_file_export.append(menu_func_export)
-
-
-def unregister() -> None:
-    bpy.types.TOPBAR_MT_file_export.remove(menu_func_export)
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+_registration = ClassesWithMenu((GT2GS_OT_export_ply,), "TOPBAR_MT_file_export", menu_func_export)
+register = _registration.register
+unregister = _registration.unregister

@@ -9,6 +9,7 @@ from bpy.props import BoolProperty, CollectionProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
 from ..blender import splats
+from ..blender.registration import ClassesWithMenu
 
 
 def engine_missing_message(exc: ImportError) -> str:
@@ -161,16 +162,6 @@ def menu_func_import(self, context):
     self.layout.operator(GT2GS_OT_import_ply.bl_idname, text="Gaussian Splat (.ply)")
 
 
-classes = (GT2GS_OT_import_ply, GT2GS_FH_ply)
-
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-    bpy.types.TOPBAR_MT_file_import.append(menu_func_import)
-
-
-def unregister() -> None:
-    bpy.types.TOPBAR_MT_file_import.remove(menu_func_import)
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+_registration = ClassesWithMenu((GT2GS_OT_import_ply, GT2GS_FH_ply), "TOPBAR_MT_file_import", menu_func_import)
+register = _registration.register
+unregister = _registration.unregister
