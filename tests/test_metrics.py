@@ -115,6 +115,22 @@ def test_evaluate_assembles_every_metric(lpips):
     assert metrics.evaluate(out.colors, out.colors, out.depths, out.alphas, cameras)["texture_match"] is None
 
 
+def test_texture_match_counts_only_covered_cells():
+    """Background cells take no texture: the metric must equal the brute force over the covered cells."""
+    scene, cameras = wall_scene(), sliding_cameras(2)
+    out = render(scene, cameras, backend="torch")
+    alphas = out.alphas.clone()
+    alphas[:, :, alphas.shape[2] // 2:] = 0.0  # pretend the right half is background
+    extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
+    bank = torch.randn(50, extractor.spec.out_channels, generator=torch.Generator().manual_seed(2))
+    result = metrics.evaluate(out.colors, out.colors, out.depths, alphas, cameras[:2], extractor=extractor,
+                              bank_features=bank)
+    feats = extractor(out.colors.permute(0, 3, 1, 2))
+    half = feats.shape[-1] // 2
+    rows = feats[..., :half].permute(0, 2, 3, 1).reshape(-1, feats.shape[1])
+    assert result["texture_match"] == pytest.approx(metrics.texture_match(rows, bank), abs=1e-6)
+
+
 def test_fps_and_peak_memory():
     assert metrics.render_fps(wall_scene(10), sliding_cameras(2), backend="torch") > 0
     memory = metrics.peak_memory_mib()

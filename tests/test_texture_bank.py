@@ -14,6 +14,7 @@ from gt2gs_blender.core.texture_bank import (
     bank_scales,
     build_texture_bank,
     cell_groups,
+    covered_cells,
     crop_side,
     depth_groups,
     rotate_crop,
@@ -208,3 +209,19 @@ def test_cell_groups_take_the_most_frequent_group_of_each_cell():
     assert out.shape == (2, 2, 3) and out[0].tolist() == [[0, 1, 2], [3, -1, -1]]
     assert out[1].tolist() == [[2, 1, 0], [-1, -1, 3]]
     assert cell_groups(torch.arange(6).reshape(2, 3), (2, 3)).tolist() == [[0, 1, 2], [3, 4, 5]]
+
+
+def test_covered_cells_need_a_majority_of_covered_pixels():
+    alpha = torch.tensor([
+        [1.0, 1.0, 0.6, 0.0],
+        [1.0, 0.0, 0.4, 0.0],
+        [0.5, 0.5, 0.0, 0.0],
+        [0.49, 0.9, 0.0, 1.0],
+    ])
+    # cells of 2x2 pixels: 3/4, 1/4, 3/4 and 1/4 covered at alpha >= 0.5
+    assert covered_cells(alpha, (2, 2)).tolist() == [[True, False], [True, False]]
+    # exactly half covered is not a majority
+    assert covered_cells(torch.tensor([[1.0, 0.0]]), (1, 1)).tolist() == [[False]]
+    batch = covered_cells(torch.stack([alpha, alpha.flip(-1)]), (2, 2))
+    assert batch.shape == (2, 2, 2) and batch[1].tolist() == [[False, True], [False, True]]
+    assert covered_cells(alpha, (4, 4)).tolist() == (alpha >= 0.5).tolist()

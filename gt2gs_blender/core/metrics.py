@@ -5,8 +5,8 @@
   render i is warped into view j by rendered depth and the known poses (exact for our scenes, where
   peers estimate optical flow), then compared with render j over valid pixels only (covered in
   both views, not occluded, inside the source) by RMSE and LPIPS-Alex, averaged over pairs.
-- ``texture_match``: mean cosine distance of each rendered feature to its nearest texture-bank
-  feature (lower = closer to the texture).
+- ``texture_match``: mean cosine distance of each rendered feature cell the object covers to its
+  nearest texture-bank feature (lower = closer to the texture; background cells are left out).
 - render FPS and peak memory.
 Images are channels-last (V,H,W,3) in [0, 1], as the rasterizer renders them.
 """
@@ -25,6 +25,7 @@ from .lpips import LPIPS
 from .rasterizer import render
 from .scene import GaussianScene
 from .ssim import ssim
+from .texture_bank import covered_cells
 from .warp import MIN_ALPHA, expected_depth, warp_image
 
 SHORT_RANGE = 1
@@ -145,12 +146,13 @@ def evaluate(
         out[f"{prefix}_rmse"], out[f"{prefix}_lpips"] = scores["rmse"], scores["lpips"]
     out["texture_match"] = None
     if extractor is not None and bank_features is not None:
-        features = torch.cat([_feature_rows(extractor, image) for image in stylised])  # a view at a time: VGG memory
+        # a view at a time (VGG memory); only the cells the object covers: the background takes no texture
+        features = torch.cat([_feature_rows(extractor, image, alpha) for image, alpha in zip(stylised, alphas)])
         out["texture_match"] = texture_match(features, bank_features)
     return out
 
 
-def _feature_rows(extractor: FeatureExtractor, image: torch.Tensor) -> torch.Tensor:
-    """The feature vectors (h*w, C) of one (H,W,3) image."""
-    features = extractor(image.permute(2, 0, 1)[None])
-    return features[0].flatten(1).T
+def _feature_rows(extractor: FeatureExtractor, image: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+    """The feature vectors (n, C) of the covered cells (:func:`covered_cells` of ``alpha``) of one (H,W,3) image."""
+    features = extractor(image.permute(2, 0, 1)[None])[0]
+    return features.flatten(1).T[covered_cells(alpha, tuple(features.shape[-2:])).flatten()]

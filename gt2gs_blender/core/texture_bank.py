@@ -311,6 +311,28 @@ def depth_groups(
     return torch.where(covered, groups, torch.full_like(groups, -1))
 
 
+def _pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: torch.device) -> torch.Tensor:
+    """Index (H*W,) of the feature cell each pixel falls in, on an (h, w) grid over an (H, W) image."""
+    h, w = feature_hw
+    rows = torch.arange(height, device=device) * h // height
+    cols = torch.arange(width, device=device) * w // width
+    return (rows[:, None] * w + cols[None, :]).reshape(-1)
+
+
+def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: float = 0.5) -> torch.Tensor:
+    """Bool (…,h,w): feature cells whose pixels are mostly covered (alpha >= ``min_alpha``).
+
+    The texture loss and texture match count only these: background cells cannot take the texture,
+    and on a small object they would otherwise outnumber the object's cells."""
+    *lead, height, width = alpha.shape
+    h, w = feature_hw
+    cell = _pixel_cells(height, width, feature_hw, alpha.device)
+    flat = (alpha >= min_alpha).reshape(-1, height * width).double()
+    covered = torch.zeros(flat.shape[0], h * w, dtype=flat.dtype, device=alpha.device).index_add_(1, cell, flat)
+    total = torch.bincount(cell, minlength=h * w).to(flat)
+    return (covered > 0.5 * total).reshape(*lead, h, w)
+
+
 def cell_groups(groups: torch.Tensor, feature_hw: tuple[int, int]) -> torch.Tensor:
     """The pixel group map (…,H,W) on a feature grid (h, w): each cell takes the most frequent group
     among the pixels that fall in it (uncovered, -1, wins ties, then the nearer group; a cell no
@@ -318,9 +340,7 @@ def cell_groups(groups: torch.Tensor, feature_hw: tuple[int, int]) -> torch.Tens
     *lead, height, width = groups.shape
     h, w = feature_hw
     n_classes = int(groups.max()) + 2 if groups.numel() else 1
-    rows = torch.arange(height, device=groups.device) * h // height
-    cols = torch.arange(width, device=groups.device) * w // width
-    cell = (rows[:, None] * w + cols[None, :]).reshape(-1)
+    cell = _pixel_cells(height, width, feature_hw, groups.device)
     flat = groups.reshape(-1, height * width) + 1
     batch = torch.arange(flat.shape[0], device=groups.device)[:, None]
     index = (batch * (h * w) + cell[None, :]) * n_classes + flat

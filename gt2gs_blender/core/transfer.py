@@ -26,7 +26,7 @@ from .losses import content_loss, nnfm_loss, tv_loss
 from .rasterizer import render
 from .scene import GaussianScene
 from .texture import load_texture
-from .texture_bank import TextureBank, build_texture_bank, cell_groups, depth_groups
+from .texture_bank import TextureBank, build_texture_bank, cell_groups, covered_cells, depth_groups
 
 BANK_MAX_CROP = 64
 """Texture crops are capped at 64 px: the kept centre cells are then identical (tested), 3-4x faster."""
@@ -178,9 +178,11 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
 
 @dataclass
 class StyleTargets:
-    """Per view: content features of the colour-transferred original and the depth group per feature cell."""
+    """Per view: content features of the colour-transferred original, the feature cells the object
+    covers (the only ones the texture loss counts) and the depth group per feature cell."""
 
     content_features: list[torch.Tensor]
+    cell_masks: list[torch.Tensor]
     cell_groups: list[torch.Tensor | None]
 
 
@@ -190,12 +192,13 @@ def style_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtrac
     """Features of the starting scene's renders (content term) and each cell's depth group."""
     start_views = render_views(start, views.cameras, views.background, backend)
     feats = [extractor(_to_nchw(start_views.composited(v))) for v in range(len(views.cameras))]
+    masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
     groups: list[torch.Tensor | None] = [None] * len(feats)
     if config.depth_groups and config.n_scales > 1:
         # all views at once, so a surface falls in the same depth group in every view
         pixel_groups = depth_groups(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
         groups = [cell_groups(pixel_groups[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
-    return StyleTargets(feats, groups)
+    return StyleTargets(feats, masks, groups)
 
 
 def stylise(scene: GaussianScene, views: ViewSet, bank: TextureBank, extractor: FeatureExtractor,
@@ -214,7 +217,8 @@ def stylise(scene: GaussianScene, views: ViewSet, bank: TextureBank, extractor: 
                      backend=config.backend, render_depth=False)
         image = out.colors[0]
         feats = extractor(_to_nchw(image))
-        style = nnfm_loss(feats, bank.features, groups=targets.cell_groups[v], bank_groups=bank.k)
+        style = nnfm_loss(feats, bank.features, mask=targets.cell_masks[v], groups=targets.cell_groups[v],
+                          bank_groups=bank.k)
         loss = (config.lambda_style * style.loss + config.lambda_content * content_loss(feats, targets.content_features[v])
                 + config.lambda_tv * tv_loss(image[None]))
         optimiser.zero_grad(set_to_none=True)
@@ -295,7 +299,7 @@ def _evaluate(result: GaussianScene, content: ViewSet, targets: StyleTargets, ba
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
                        lpips=lpips, extractor=extractor, bank_features=bank.features)
-    start_features = torch.cat([f[0].flatten(1).T for f in targets.content_features])
+    start_features = torch.cat([f[0].flatten(1).T[m.flatten()] for f, m in zip(targets.content_features, targets.cell_masks)])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 
