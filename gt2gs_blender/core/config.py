@@ -21,6 +21,7 @@ class TransferConfig:
     texture_height: int = 256        # texture height at the nearest depth group (paper 256)
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
     color_transfer: bool = True      # ARF colour transfer before and after stylisation
+    angle: float = 0.0               # orientation control: the texture's angle in the first view (degrees)
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     features: str = "auto"           # feature network preference (see features.load_feature_extractor)
     weights_path: str | None = None  # explicit weights file or folder
