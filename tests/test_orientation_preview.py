@@ -1,0 +1,107 @@
+"""The orientation preview: the texture's on-screen direction follows the angle, nearer is larger, fast."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from gt2gs_blender.core.cameras import look_at
+from gt2gs_blender.core.orientation_preview import orientation_preview, texture_layer
+from gt2gs_blender.core.scene import GaussianScene
+
+
+def wall(n_side: int = 60, tilt: float = 0.0) -> GaussianScene:
+    """A grey square wall of Gaussians in the z = 0 plane (tilted about x by ``tilt`` along y)."""
+    u = torch.linspace(-1.0, 1.0, n_side)
+    y, x = torch.meshgrid(u, u, indexing="ij")
+    means = torch.stack([x.reshape(-1), y.reshape(-1), tilt * y.reshape(-1)], dim=1)
+    n = len(means)
+    return GaussianScene.from_activated(means, torch.full((n, 3), 0.03), torch.full((n,), 0.95),
+                                        torch.full((n, 3), 0.6))
+
+
+def horizontal_stripes(size: int = 128, period: int = 16) -> np.ndarray:
+    """Smooth (sinusoidal) horizontal stripes that tile seamlessly, so the measured direction is not aliased."""
+    rows = 0.5 + 0.4 * np.cos(2.0 * np.pi * np.arange(size) / period)
+    band = np.repeat(rows[:, None], size, axis=1).astype(np.float32)
+    return np.repeat(band[..., None], 3, axis=2)
+
+
+def stripe_direction(image: np.ndarray) -> float:
+    """Dominant stripe direction in degrees [0, 180), counter-clockwise on screen, from the structure tensor."""
+    grey = image.astype(np.float64).mean(axis=-1)
+    gy, gx = np.gradient(grey)
+    gy = -gy  # screen y is down: measure angles counter-clockwise as seen
+    jxx, jyy, jxy = (gx * gx).sum(), (gy * gy).sum(), (gx * gy).sum()
+    gradient = 0.5 * np.degrees(np.arctan2(2 * jxy, jxx - jyy))
+    return (gradient + 90.0) % 180.0
+
+
+def angle_gap(a: float, b: float) -> float:
+    d = (a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+def front_camera(size: int = 256, distance: float = 2.2):
+    return look_at((0.0, 0.0, -distance), (0.0, 0.0, 0.0), width=size, height=size, fov_deg=40.0, up=(0.0, -1.0, 0.0))
+
+
+def centre(image: np.ndarray, border: int = 80) -> np.ndarray:
+    return image[border:-border, border:-border]
+
+
+def test_texture_layer_rotates_counter_clockwise_on_screen():
+    stripes = horizontal_stripes()
+    assert angle_gap(stripe_direction(texture_layer(stripes, 0.0, 1.0, 128, 128)), 0.0) < 2.0
+    assert angle_gap(stripe_direction(texture_layer(stripes, 30.0, 1.0, 128, 128)), 30.0) < 3.0
+
+
+@pytest.mark.parametrize("angle", [30.0, 75.0, -40.0])
+def test_preview_stripes_turn_by_the_angle(angle):
+    scene, cam, stripes = wall(), front_camera(), horizontal_stripes()
+    base = orientation_preview(scene, stripes, cam, 0.0, size=256, texture_height=32, n_groups=1)
+    turned = orientation_preview(scene, stripes, cam, angle, size=256, texture_height=32, n_groups=1)
+    assert base.shape == turned.shape == (256, 256, 3) and base.dtype == np.uint8
+    measured = (stripe_direction(centre(turned)) - stripe_direction(centre(base))) % 180.0
+    assert angle_gap(measured, angle % 180.0) < 4.0
+
+
+def test_preview_background_outside_and_inputs_untouched():
+    scene, stripes = wall(), horizontal_stripes()
+    before = {k: v.clone() for k, v in scene.tensors().items()}
+    texture = stripes.copy()
+    image = orientation_preview(scene, texture, front_camera(distance=4.0), 20.0, background=(0.0, 1.0, 0.0))
+    assert np.array_equal(image[0, 0], [0, 255, 0])  # the wall does not reach the corner
+    assert image[128, 128].tolist() != [0, 255, 0]
+    assert np.array_equal(texture, stripes)
+    assert all(torch.equal(before[k], v) for k, v in scene.tensors().items())
+
+
+def stripe_period(row: np.ndarray) -> float:
+    """Mean distance (pixels) between rising edges of a binarised profile."""
+    binary = row > row.mean()
+    rises = np.flatnonzero(~binary[:-1] & binary[1:])
+    return float(np.diff(rises).mean())
+
+
+def test_nearer_depth_group_shows_the_texture_larger():
+    """A wall tilted away from the camera: its near half gets the larger (scale 1) texture."""
+    vertical = np.ascontiguousarray(horizontal_stripes(period=8).transpose(1, 0, 2))
+    scene = wall(tilt=1.5)
+    cam = look_at((0.0, 0.0, -3.0), (0.0, 0.0, 0.0), width=256, height=256, fov_deg=60.0, up=(0.0, -1.0, 0.0))
+    image = orientation_preview(scene, vertical, cam, 0.0, texture_height=128, n_groups=2).mean(axis=-1)
+    rows = np.flatnonzero((image < 250).mean(axis=1) > 0.3)  # rows the wall covers
+    near, far = rows[len(rows) // 5], rows[-len(rows) // 5]  # -y (top) tilts towards the camera
+    near_row, far_row = (image[r][image[r] < 250] for r in (near, far))
+    assert stripe_period(near_row) > 1.5 * stripe_period(far_row)
+
+
+def test_preview_is_fast_at_256_pixels():
+    """The issue's budget: at most 2 s at 256 px on the CPU (here far less; loose bound for busy machines)."""
+    scene, cam, stripes = wall(100), front_camera(), horizontal_stripes()
+    orientation_preview(scene, stripes, cam, 0.0)  # builds / loads the rasterizer once
+    start = time.perf_counter()
+    orientation_preview(scene, stripes, cam, 45.0)
+    assert time.perf_counter() - start < 2.0
