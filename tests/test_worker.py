@@ -1,0 +1,163 @@
+"""The worker process and its Blender-side handle (bpy-free): events, outputs, cancel, crash, bad input."""
+from __future__ import annotations
+
+import inspect
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
+from gt2gs_blender.core import deps
+from gt2gs_blender.core.ply import read_ply_arrays, write_ply
+from gt2gs_blender.core.transfer import transfer
+from gt2gs_blender.core.worker import EXIT_INPUT, JobSpec, write_png
+
+from .test_transfer import blob_scene, stripes
+
+ROOT = Path(__file__).resolve().parents[1]
+TINY = dict(resolution=48, n_views=3, stylise_steps=6, n_scales=2, n_angles=4, texture_height=96, evaluate=False,
+            preview_every=2)
+
+
+@pytest.fixture
+def job(tmp_path):
+    """A job whose inputs (a small scene and a stripe texture) are in its folder; cleaned up afterwards."""
+    job = Job()
+    write_ply(job.path("input.ply"), blob_scene(600))
+    write_png(job.path("texture.png"), (stripes() * 255).astype(np.uint8))
+    yield job
+    job.cleanup()
+    assert not job.folder.exists()
+
+
+def transfer_spec(tmp_path, **config) -> dict:
+    return {"kind": "transfer", "input": "input.ply", "texture": "texture.png", "output": "out.ply",
+            "report": "report.json", "views": 3, "preset": "preview",
+            "config": {**TINY, "cache_dir": str(tmp_path / "banks"), **config}}
+
+
+def wait_for(job: Job, condition, timeout: float = 120.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        status = job.poll()
+        if condition(status):
+            return status
+        time.sleep(0.05)
+    raise AssertionError(f"timed out; status {job.status}, stderr {job.stderr_tail()}")
+
+
+def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
+    job.start(transfer_spec(tmp_path))
+    fractions, stages = [], []
+    while not job.poll().finished:
+        fractions.append(job.status.fraction)
+        stages.append(job.status.stage)
+        time.sleep(0.05)
+    status = job.status
+    assert status.state == DONE, (status, job.stderr_tail())
+    assert fractions == sorted(fractions) and status.fraction == 1.0
+    assert {"prepare", "bank", "stylise"} <= set(stages)
+    assert status.preview is not None and Path(status.preview).parent == job.path("previews")
+    assert Path(status.preview).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert status.report["n_views"] == 3 and status.report["config"]["stylise_steps"] == 6
+    original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
+    assert len(result) == len(original) and not np.allclose(result.sh_dc, original.sh_dc)
+    assert not [p for p in job.folder.rglob("*.tmp")]
+
+
+def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
+    job.start(transfer_spec(tmp_path, stylise_steps=400))
+    wait_for(job, lambda s: s.stage == "stylise" and s.step >= 2)
+    started = time.monotonic()
+    status = job.cancel()
+    assert status.state == CANCELLED and time.monotonic() - started < 5.0
+    assert job.process.returncode == 3  # stopped by itself (SIGTERM handled), not killed
+    assert not job.path("out.ply").exists() and not job.path("report.json").exists()
+
+
+def test_killed_worker_is_a_clear_error(job, tmp_path):
+    job.start(transfer_spec(tmp_path, stylise_steps=400))
+    wait_for(job, lambda s: s.stage == "stylise")
+    os.kill(job.process.pid, signal.SIGKILL)
+    status = wait_for(job, lambda s: s.finished, timeout=20)
+    assert status.state == ERROR and "killed by signal 9" in status.error
+    assert not job.path("out.ply").exists()
+
+
+def test_bad_input_is_one_readable_line(job, tmp_path):
+    job.start({**transfer_spec(tmp_path), "texture": "missing.png"})
+    status = wait_for(job, lambda s: s.finished, timeout=60)
+    assert status.state == ERROR and job.process.returncode == EXIT_INPUT
+    assert "missing.png" in status.error and "Traceback" not in status.error
+
+
+def test_region_mask_is_checked_and_passed_only_when_supported(job, tmp_path):
+    np.save(job.path("region.npy"), np.arange(0, 600, 2))
+    job.start({**transfer_spec(tmp_path), "region": "region.npy"})
+    status = wait_for(job, lambda s: s.finished)
+    if "region" in inspect.signature(transfer).parameters:
+        assert status.state == DONE, status.error
+    else:
+        assert status.state == ERROR and "region" in status.error
+
+
+def test_preview_job_writes_a_png(job, tmp_path):
+    job.start({"kind": "preview", "input": "input.ply", "texture": "texture.png", "output": "preview.png",
+               "views": 4, "preset": "preview", "config": {"angle": 30.0}, "preview_size": 64})
+    status = wait_for(job, lambda s: s.finished, timeout=60)
+    assert status.state == DONE, status.error
+    import cv2
+
+    assert cv2.imread(status.output).shape == (64, 64, 3)
+
+
+def test_job_spec_rejects_malformed_files(tmp_path):
+    path = tmp_path / "job.json"
+    for content, message in [("[]", "JSON object"), ('{"kind": "x", "input": "a", "texture": "b", "output": "c"}',
+                                                     "unknown job kind"),
+                             ('{"kind": "preview", "input": "a"}', "lacks texture, output"),
+                             ('{"kind": "preview", "input": "a", "texture": "b", "output": "c", "views": true}',
+                              "views must be")]:
+        path.write_text(content)
+        with pytest.raises(Exception, match=message):
+            JobSpec.load(path)
+
+
+def test_worker_command_line_exit_status(tmp_path):
+    result = subprocess.run([sys.executable, "-m", "gt2gs_blender.core.worker", str(tmp_path / "none.json")],
+                            capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert result.returncode == EXIT_INPUT
+    (event,) = [json.loads(line) for line in result.stdout.splitlines()]
+    assert event["event"] == "error" and "none.json" in event["message"]
+
+
+def test_pins_match_requirements_txt():
+    pinned = dict(line.split("==") for line in (ROOT / "requirements.txt").read_text().splitlines()
+                  if "==" in line and not line.startswith("#"))
+    assert {name: pinned[name] for name in deps.PINS} == deps.PINS
+
+
+def test_install_command_targets_the_deps_folder():
+    cpu = deps.install_command("/blender/python", "/user/ext/deps", "CPU")
+    assert cpu[:3] == ["/blender/python", "-m", "pip"] and "install" in cpu
+    assert cpu[cpu.index("--target") + 1] == "/user/ext/deps"
+    assert cpu[cpu.index("--extra-index-url") + 1] == deps.TORCH_INDEX["CPU"]
+    assert {"torch==2.13.0", "numpy==1.26.4", "opencv-contrib-python-headless==4.11.0.86"} <= set(cpu)
+    cuda = deps.install_command("/blender/python", "/user/ext/deps", "CUDA")
+    assert cuda[cuda.index("--extra-index-url") + 1].endswith("/cu128")
+    with pytest.raises(ValueError):
+        deps.install_command("python", "deps", "ROCM")
+
+
+def test_dependency_status_sees_this_environment(tmp_path):
+    status = {d.module: d for d in deps.dependency_status(tmp_path)}
+    assert set(status) == {"torch", "numpy", "cv2"}
+    assert all(d.ok for d in status.values())
+    assert status["numpy"].version == np.__version__
