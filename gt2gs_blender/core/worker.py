@@ -3,7 +3,7 @@
 ``python -m gt2gs_blender.core.worker JOB.json`` runs it outside Blender (DESIGN §7: torch never
 loads into Blender, a crash cannot take Blender down, Cancel can always stop it). The job file:
 
-    {"kind": "transfer" | "preview", "input": "scene.ply", "texture": "texture.png",
+    {"kind": "transfer" | "preview", "input": "scene.ply", "texture": "texture.png" (or pixels.npy),
      "views": "cameras.json" | 8 | null, "preset": "fast", "config": {TransferConfig overrides},
      "region": "mask.npy" | null, "output": "out.ply" (preview: out.png), "report": "report.json",
      "preview_dir": "previews", "cancel_file": "cancel", "preview_size": 256}
@@ -141,6 +141,19 @@ def load_region(path: Path, n: int) -> np.ndarray:
     return np.unique(indices.astype(np.int64))
 
 
+def _texture(spec: JobSpec) -> np.ndarray | str:
+    """The texture: an image file's path, or an (H,W,3) float array in [0,1] saved as .npy (Blender's pixels)."""
+    if spec.texture.suffix.lower() != ".npy":
+        return str(spec.texture)
+    try:
+        image = np.load(spec.texture, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputFileError(spec.texture, f"cannot read the texture pixels ({exc})") from None
+    if image.ndim != 3 or image.shape[2] < 3 or not np.isfinite(image).all():
+        raise InputFileError(spec.texture, f"texture pixels must be a finite (H, W, 3) array, got {image.shape}")
+    return np.clip(image[..., :3], 0.0, 1.0).astype(np.float32)
+
+
 def _views(spec: JobSpec):
     if isinstance(spec.views, Path):
         from .cameras import load_views
@@ -189,7 +202,7 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
         events("progress", stage=p.stage, step=p.step, total=p.total, fraction=p.fraction, eta_s=p.eta_s,
                message=p.message, preview=None if frame is None else str(frame))
 
-    result = transfer(scene, str(spec.texture), views, config, progress=progress, cancel=cancel, **extra)
+    result = transfer(scene, _texture(spec), views, config, progress=progress, cancel=cancel, **extra)
     write_ply(spec.output, result.scene)
     if spec.report is not None:
         atomic_write(spec.report, json.dumps(result.report, indent=1, default=str))
@@ -207,7 +220,7 @@ def run_preview(spec: JobSpec, events: Events) -> None:
     views = _views(spec)
     camera = views[0] if isinstance(views, list) else auto_views(scene, views or config.n_views, width=spec.preview_size,
                                                                  height=spec.preview_size)[0]
-    image = orientation_preview(scene, str(spec.texture), camera, config.angle, size=spec.preview_size,
+    image = orientation_preview(scene, _texture(spec), camera, config.angle, size=spec.preview_size,
                                 resolution=config.resolution, texture_height=config.texture_height,
                                 n_groups=config.n_scales if config.depth_groups else 1,
                                 background=config.background, backend=config.backend)

@@ -1,12 +1,14 @@
 """Blender operators. Each submodule registers its own classes and menu entries.
 
-Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (both take ``filepath``).
+Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (both take ``filepath``),
+``gt2gs.transfer_texture`` and ``gt2gs.preview_orientation`` (``texture_path``, ``preset``, ``angle``,
+``n_views`` override the panel's settings).
 """
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import io_export, io_import
+from . import dependencies, io_export, io_import, transfer
 
-_group = ModuleGroup((io_import, io_export))
+_group = ModuleGroup((io_import, io_export, transfer, dependencies))
 register = _group.register
 unregister = _group.unregister

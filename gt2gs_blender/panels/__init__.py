@@ -1,9 +1,9 @@
-"""Blender UI: the GT² tab in the 3D View sidebar."""
+"""Blender UI: the scene's GT² settings, the GT² tab in the 3D View sidebar, the preferences."""
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import sidebar
+from . import preferences, settings, sidebar, transfer_panel
 
-_group = ModuleGroup((sidebar,))
+_group = ModuleGroup((settings, sidebar, transfer_panel, preferences))
 register = _group.register
 unregister = _group.unregister

@@ -1,0 +1,288 @@
+"""A texture transfer or orientation preview run from Blender: inputs out to a worker job, result back in.
+
+``start`` exports the target's splats, texture, views and region into a ``Job`` folder and launches
+the worker; ``tick`` polls it (never blocks), shows new preview frames and, when the worker is done,
+applies the result as a new object or in place. Until then nothing in the scene changes, so a
+cancelled or failed run leaves it exactly as it was. The modal operator calls ``tick`` on its timer,
+the headless operator in a loop, tests directly. One run of each kind at a time (``ACTIVE``: a new
+preview replaces a running one, a second transfer is refused); the panel reads them and how the
+last run of each kind ended (``OUTCOMES``).
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import bpy
+import bpy.utils.previews
+import numpy as np
+
+from . import addon, splats, views
+from .job import CANCELLED, DONE, ERROR, Job, JobStatus
+
+SELECTION_ATTRIBUTE = ".selection"
+"""The point selection of a point cloud's Edit Mode."""
+PREVIEW_KEY = "preview"
+RESULT_SUFFIX = " GT²"
+
+
+class RunError(Exception):
+    """A run cannot start; the message is meant for the user."""
+
+
+@dataclass
+class Outcome:
+    """How the last transfer ended, for the panel: state, a message, the report, the result object's name."""
+
+    state: str
+    message: str
+    report: dict[str, Any] | None = None
+    result: str | None = None
+    seconds: float = 0.0
+
+
+ACTIVE: dict[str, "TransferRun"] = {}
+OUTCOMES: dict[str, Outcome] = {}
+_previews: dict[str, Any] = {}
+
+
+def target_object(context):
+    """The splat object a run acts on: the panel's target, else the active object (None if not a splat)."""
+    settings = context.scene.gt2gs
+    obj = settings.target or context.active_object
+    return obj if splats.is_splat_object(obj) else None
+
+
+def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """(preset, TransferConfig overrides) from the panel's settings, the preferences and the operator's keywords."""
+    settings = context.scene.gt2gs
+    prefs = addon.preferences(context)
+    device = settings.device if settings.device != "DEFAULT" else (prefs.device if prefs else "AUTO")
+    config: dict[str, Any] = {
+        "angle": float(overrides.get("angle", settings.angle)), "lambda_content": settings.lambda_content,
+        "seed": settings.seed, "color_transfer": settings.color_transfer, "depth_groups": settings.depth_groups,
+        "device": device.lower(), "weights_path": addon.weights_path(context),
+    }
+    for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles")):
+        if getattr(settings, prop) > 0:
+            config[key] = getattr(settings, prop)
+    return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
+
+
+def view_spec(context, obj, job: Job, overrides: dict[str, Any]) -> str | int | None:
+    """The job's ``views``: a count of automatic views (or None: the preset's) or a cameras.json path."""
+    settings = context.scene.gt2gs
+    if "n_views" in overrides:
+        return int(overrides["n_views"])
+    if settings.view_source == "AUTO":
+        return settings.n_views or None
+    if settings.view_source == "CAMERAS_JSON":
+        path = os.path.abspath(bpy.path.abspath(settings.cameras_json))
+        if not os.path.isfile(path):
+            raise RunError(f"cameras.json not found: {path}")
+        return path
+    if settings.view_source == "COLLECTION":
+        if settings.camera_collection is None:
+            raise RunError("choose a camera collection for the views")
+        objects = settings.camera_collection.all_objects
+    else:
+        objects = context.scene.objects
+    cameras = sorted((o for o in objects if o.type == "CAMERA"), key=lambda o: o.name)
+    try:
+        entries = views.camera_entries(cameras, context.scene, np.array(obj.matrix_world))
+    except views.ViewError as exc:
+        raise RunError(str(exc)) from None
+    job.path("cameras.json").write_text(json.dumps(entries, indent=1), encoding="utf-8")
+    return "cameras.json"
+
+
+def texture_spec(context, job: Job, override: str | None) -> str:
+    """The job's texture: a file on disk, or an image datablock's pixels saved as .npy in the job folder."""
+    settings = context.scene.gt2gs
+    if override or settings.texture_source == "FILE":
+        path = os.path.abspath(bpy.path.abspath(override or settings.texture_path))
+        if not os.path.isfile(path):
+            raise RunError(f"texture file not found: {path or '(none chosen)'}")
+        return path
+    image = settings.texture_image
+    if image is None:
+        raise RunError("choose a texture image")
+    source = os.path.abspath(bpy.path.abspath(image.filepath_from_user())) if image.filepath else ""
+    if source and os.path.isfile(source) and not image.is_dirty and image.packed_file is None:
+        return source
+    width, height = image.size
+    if width == 0 or height == 0:
+        raise RunError(f"image {image.name!r} has no pixels")
+    pixels = np.empty(width * height * image.channels, np.float32)
+    image.pixels.foreach_get(pixels)
+    rgb = pixels.reshape(height, width, image.channels)[::-1, :, :3]
+    if image.is_float:  # float buffers are scene-linear: back to display sRGB, as photos are
+        rgb = np.where(rgb <= 0.0031308, rgb * 12.92, 1.055 * np.power(np.clip(rgb, 0, None), 1 / 2.4) - 0.055)
+    if rgb.shape[2] == 1:
+        rgb = np.repeat(rgb, 3, axis=2)
+    np.save(job.path("texture.npy"), np.ascontiguousarray(np.clip(rgb, 0.0, 1.0), np.float32))
+    return "texture.npy"
+
+
+def selected_points(obj) -> np.ndarray:
+    """Indices of the points selected in Edit Mode; RunError when none are."""
+    attribute = obj.data.attributes.get(SELECTION_ATTRIBUTE)
+    n = len(obj.data.points)
+    if attribute is None or attribute.domain != "POINT":
+        raise RunError(f"{obj.name!r} has no point selection: select points in Edit Mode first")
+    values = np.empty(n, bool if attribute.data_type == "BOOLEAN" else np.float32)
+    attribute.data.foreach_get("value", values)
+    indices = np.flatnonzero(values > 0)
+    if indices.size == 0:
+        raise RunError(f"no points of {obj.name!r} are selected")
+    return indices
+
+
+def show_preview(path: str) -> None:
+    """Load a PNG frame into the panel's preview image (an ImagePreview, not a datablock of the file)."""
+    image = bpy.data.images.load(path, check_existing=False)
+    try:
+        width, height = image.size
+        pixels = np.empty(width * height * 4, np.float32)
+        image.pixels.foreach_get(pixels)
+    finally:
+        bpy.data.images.remove(image)
+    if "collection" not in _previews:
+        _previews["collection"] = bpy.utils.previews.new()
+    collection = _previews["collection"]
+    preview = collection.get(PREVIEW_KEY) or collection.new(PREVIEW_KEY)
+    preview.image_size = (width, height)
+    preview.image_pixels_float.foreach_set(pixels)
+
+
+def preview_icon() -> int:
+    """The icon id of the panel's preview image, 0 when there is none."""
+    collection = _previews.get("collection")
+    preview = collection.get(PREVIEW_KEY) if collection is not None else None
+    return preview.icon_id if preview is not None else 0
+
+
+def release_previews() -> None:
+    """Free the preview images (at unregister)."""
+    collection = _previews.pop("collection", None)
+    if collection is not None:
+        bpy.utils.previews.remove(collection)
+
+
+@dataclass
+class TransferRun:
+    """One worker job started from Blender and what to do with its result."""
+
+    job: Job
+    kind: str
+    object_name: str
+    result_mode: str = "NEW"
+    shown_preview: str | None = None
+    cancel_requested: bool = False
+    result_name: str | None = None
+    started: float = field(default_factory=time.monotonic)
+
+    @classmethod
+    def start(cls, context, overrides: dict[str, Any] | None = None, kind: str = "transfer") -> "TransferRun":
+        """Export the target and start the worker; RunError (nothing started, nothing left) when it cannot."""
+        overrides = overrides or {}
+        if kind == "transfer" and kind in ACTIVE:
+            raise RunError("a texture transfer is already running; cancel it first")
+        if kind in ACTIVE:  # a newer preview supersedes the running one
+            ACTIVE[kind].cancel()
+            ACTIVE[kind].finish()
+        obj = target_object(context)
+        if obj is None:
+            raise RunError("select a Gaussian splat object (import a .ply first)")
+        settings = context.scene.gt2gs
+        job = Job(deps_dir=addon.deps_dir())
+        try:
+            from ..core.ply import write_ply
+
+            scene, _ = splats.object_to_scene(obj)
+            write_ply(job.path("input.ply"), scene)
+            preset, config = config_overrides(context, overrides)
+            spec: dict[str, Any] = {
+                "kind": kind, "input": "input.ply", "texture": texture_spec(context, job, overrides.get("texture_path")),
+                "views": view_spec(context, obj, job, overrides), "preset": preset, "config": config,
+                "output": "result.ply" if kind == "transfer" else "orientation.png", "report": "report.json",
+            }
+            if kind == "transfer" and settings.region_only:
+                np.save(job.path("region.npy"), selected_points(obj))
+                spec["region"] = "region.npy"
+            job.start(spec)
+        except BaseException as exc:
+            job.cleanup()
+            if isinstance(exc, (splats.SplatObjectError, OSError)):
+                raise RunError(str(exc)) from None
+            raise
+        run = cls(job, kind, obj.name, settings.result_mode)
+        ACTIVE[kind] = run
+        return run
+
+    def tick(self, context) -> JobStatus:
+        """Poll the worker, show a new preview frame, apply the result once it is done."""
+        status = self.job.poll()
+        if status.preview and status.preview != self.shown_preview and os.path.isfile(status.preview):
+            show_preview(status.preview)
+            self.shown_preview = status.preview
+        if status.state == DONE and self.kind == "preview" and self.shown_preview != status.output:
+            show_preview(status.output)
+            self.shown_preview = status.output
+        if status.state == DONE and self.kind == "transfer" and self.result_name is None:
+            try:
+                self.result_name = apply_result(context, self.object_name, status.output, self.result_mode).name
+            except (splats.SplatObjectError, RunError, OSError, ValueError) as exc:
+                status.state, status.error = ERROR, f"the result could not be applied: {exc}"
+        return status
+
+    def cancel(self) -> JobStatus:
+        return self.job.cancel()
+
+    def finish(self) -> Outcome:
+        """Remove the job's files, record the outcome in ``OUTCOMES`` and leave ``ACTIVE``."""
+        status = self.job.status
+        self.job.cleanup()
+        seconds = time.monotonic() - self.started
+        if status.state == DONE:
+            outcome = Outcome(DONE, f"done in {seconds:.0f} s", status.report, self.result_name, seconds)
+        elif status.state == CANCELLED:
+            outcome = Outcome(CANCELLED, "cancelled; the scene is unchanged", seconds=seconds)
+        else:
+            outcome = Outcome(ERROR, status.error or "the transfer failed", seconds=seconds)
+        if ACTIVE.get(self.kind) is self:
+            del ACTIVE[self.kind]
+        OUTCOMES[self.kind] = outcome
+        return outcome
+
+
+def apply_result(context, object_name: str, path: str, mode: str):
+    """Add the result PLY as a new splat object beside the source, or swap it into the source (in place)."""
+    from ..core.ply import read_ply_arrays
+
+    source = bpy.data.objects.get(object_name)
+    if source is None or not splats.is_splat_object(source):
+        raise RunError(f"the object {object_name!r} is gone; the result was not applied")
+    collection = source.users_collection[0] if source.users_collection else context.scene.collection
+    arrays = read_ply_arrays(path)
+    made = splats.scene_to_object(arrays, source.name + RESULT_SUFFIX, collection, source_format="binary_little_endian",
+                                  with_material=bool(source.data.materials))
+    if mode == "NEW":
+        made.matrix_world = source.matrix_world.copy()
+        for obj in context.view_layer.objects.selected:
+            obj.select_set(False)
+        if made.visible_get():
+            made.select_set(True)
+        context.view_layer.objects.active = made
+        return made
+    old, cloud = source.data, made.data
+    bpy.data.objects.remove(made)
+    source.data = cloud
+    if old.users == 0:
+        name = old.name
+        bpy.data.pointclouds.remove(old)
+        cloud.name = name
+    return source

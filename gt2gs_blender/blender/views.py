@@ -1,0 +1,74 @@
+"""Blender cameras as 3DGS ``cameras.json`` entries in a splat object's own (PLY) space.
+
+Blender cameras look down -z with y up; ``core`` uses OpenCV axes, so the camera-to-world rotation
+is ``R_cv = R_blender @ diag(1, -1, -1)`` (DESIGN §3). The PLY lives in the object's local space, so
+each camera is expressed relative to the object: ``inverse(object.matrix_world) @ camera.matrix_world``,
+with the scale taken out of the rotation (exact for uniform object scale; a non-uniform scale
+makes the views approximate). Intrinsics follow Blender's sensor fit, lens shift and the scene's
+render resolution.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+import numpy as np
+
+BLENDER_TO_CV = np.diag([1.0, -1.0, -1.0])
+
+
+class ViewError(ValueError):
+    """Cameras cannot be used as views; the message is meant for the user."""
+
+
+def render_size(scene) -> tuple[int, int]:
+    """The scene's output size in pixels (resolution times percentage)."""
+    render = scene.render
+    scale = render.resolution_percentage / 100.0
+    return max(1, round(render.resolution_x * scale)), max(1, round(render.resolution_y * scale))
+
+
+def intrinsics(lens: float, sensor_width: float, sensor_height: float, sensor_fit: str, shift_x: float,
+               shift_y: float, width: int, height: int) -> tuple[float, float, float, float]:
+    """(fx, fy, cx, cy) in pixels for a Blender perspective camera (square pixels)."""
+    if sensor_fit == "HORIZONTAL" or (sensor_fit == "AUTO" and width >= height):
+        focal = lens / sensor_width * width
+    else:  # VERTICAL spans the height with sensor_height; AUTO spans the larger side with sensor_width
+        focal = lens / (sensor_height if sensor_fit == "VERTICAL" else sensor_width) * height
+    larger = max(width, height)
+    return focal, focal, width / 2.0 - shift_x * larger, height / 2.0 + shift_y * larger
+
+
+def camera_pose(camera_to_world: np.ndarray, object_to_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position, OpenCV camera-to-world rotation) of a Blender camera in an object's local space."""
+    local = np.linalg.inv(np.asarray(object_to_world, np.float64)) @ np.asarray(camera_to_world, np.float64)
+    linear = local[:3, :3]
+    norms = np.linalg.norm(linear, axis=0)
+    if np.any(norms < 1e-12) or not np.all(np.isfinite(local)):
+        raise ViewError("a camera or the object has a degenerate (zero or non-finite) transform")
+    u, _, vt = np.linalg.svd(linear / norms)
+    rotation = u @ vt
+    if np.linalg.det(rotation) < 0:
+        raise ViewError("a camera or the object is mirrored (negative scale); views cannot be built")
+    return local[:3, 3], rotation @ BLENDER_TO_CV
+
+
+def camera_entries(cameras: Iterable[Any], scene, object_to_world: np.ndarray) -> list[dict[str, Any]]:
+    """``cameras.json`` entries for perspective camera objects, in the given order."""
+    width, height = render_size(scene)
+    entries = []
+    for obj in cameras:
+        data = obj.data
+        if data.type != "PERSP":
+            raise ViewError(f"camera {obj.name!r} is {data.type.lower()}; only perspective cameras can be views")
+        position, rotation = camera_pose(np.array(obj.matrix_world), object_to_world)
+        fx, fy, cx, cy = intrinsics(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit,
+                                    data.shift_x, data.shift_y, width, height)
+        if not all(math.isfinite(v) and v > 0 for v in (fx, fy)):
+            raise ViewError(f"camera {obj.name!r} has an unusable focal length")
+        entries.append({"id": len(entries), "img_name": obj.name, "width": width, "height": height,
+                        "position": position.tolist(), "rotation": rotation.tolist(), "fx": fx, "fy": fy,
+                        "cx": cx, "cy": cy})
+    if not entries:
+        raise ViewError("no cameras to use as views")
+    return entries

@@ -1,0 +1,89 @@
+"""Install dependencies: pip installs the pinned engine packages into the extension's user folder.
+
+Runs pip in a subprocess polled by a timer, so Blender stays responsive during the download. Only
+when Blender allows online access (the manifest declares the network permission).
+"""
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+import tempfile
+
+import bpy
+
+from ..blender import addon
+from ..core import deps
+
+POLL_S = 0.5
+
+
+def install_commands(build: str, target: str) -> list[list[str]]:
+    """The commands this button runs with Blender's Python: ensurepip when pip is absent, then pip install."""
+    bootstrap = [[sys.executable, "-m", "ensurepip", "--upgrade"]] if importlib.util.find_spec("pip") is None else []
+    return [*bootstrap, deps.install_command(sys.executable, target, build)]
+
+
+class GT2GS_OT_install_dependencies(bpy.types.Operator):
+    """Download torch, numpy and OpenCV (pinned versions) with pip into the extension's user folder"""
+
+    bl_idname = "gt2gs.install_dependencies"
+    bl_label = "Install Dependencies"
+
+    _commands: list[list[str]]
+    _process: subprocess.Popen | None = None
+    _log = None
+    _timer = None
+
+    @classmethod
+    def poll(cls, context):
+        if not bpy.app.online_access:
+            cls.poll_message_set("Online access is disabled (Preferences ▸ System ▸ Network)")
+            return False
+        if addon.deps_dir() is None:
+            cls.poll_message_set("Only the installed extension can install its dependencies")
+            return False
+        return True
+
+    def invoke(self, context, event):
+        prefs = addon.preferences(context)
+        self._commands = install_commands(prefs.build if prefs else "CPU", addon.deps_dir(create=True))
+        self._log = tempfile.TemporaryFile(mode="w+", encoding="utf-8")
+        self._next()
+        self._timer = context.window_manager.event_timer_add(POLL_S, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        self.report({"INFO"}, "Installing the dependencies with pip (this can take several minutes)")
+        return {"RUNNING_MODAL"}
+
+    def _next(self) -> None:
+        self._process = subprocess.Popen(self._commands.pop(0), stdin=subprocess.DEVNULL, stdout=self._log,
+                                         stderr=subprocess.STDOUT)
+
+    def modal(self, context, event):
+        if event.type != "TIMER" or self._process.poll() is None:
+            return {"PASS_THROUGH"}
+        if self._process.returncode == 0 and self._commands:
+            self._next()
+            return {"PASS_THROUGH"}
+        context.window_manager.event_timer_remove(self._timer)
+        self._log.seek(0)
+        lines = [line for line in self._log.read().splitlines() if line.strip()]
+        self._log.close()
+        if self._process.returncode != 0:
+            self.report({"ERROR"}, "pip failed: " + (lines[-1] if lines else f"exit status {self._process.returncode}"))
+            return {"CANCELLED"}
+        self.report({"INFO"}, "Dependencies installed")
+        return {"FINISHED"}
+
+
+classes = (GT2GS_OT_install_dependencies,)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

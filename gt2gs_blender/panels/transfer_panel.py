@@ -1,0 +1,175 @@
+"""The GT² tab's Texture Transfer panel: settings, Preview Orientation, Transfer, Cancel, progress, report.
+
+What it shows in each state (idle, running, done, error, cancelled) comes from ``transfer_view``, a
+plain function the tests check; ``draw`` only lays that out.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import bpy
+
+from ..blender import transfer_run
+from ..blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from .sidebar import CATEGORY
+
+STAGE_NAMES = {"starting": "Starting", "prepare": "Preparing views", "bank": "Texture bank",
+               "stylise": "Stylising", "finish": "Finishing"}
+ICONS = {IDLE: "INFO", RUNNING: "TIME", DONE: "CHECKMARK", ERROR: "ERROR", CANCELLED: "CANCEL"}
+
+
+@dataclass(frozen=True)
+class TransferView:
+    """Everything the panel shows besides the settings: state, buttons, progress bar, message, report."""
+
+    state: str
+    can_transfer: bool
+    can_cancel: bool
+    message: str
+    icon: str
+    progress: float | None = None
+    progress_text: str = ""
+    report_rows: list[tuple[str, str]] = field(default_factory=list)
+
+
+def eta_text(seconds: float | None) -> str:
+    """``ETA 1:05`` (empty while unknown)."""
+    if seconds is None:
+        return ""
+    seconds = max(0, int(round(seconds)))
+    return f"ETA {seconds // 60}:{seconds % 60:02d}"
+
+
+def progress_text(status: JobStatus) -> str:
+    """``Stylising 12/40 · 45% · ETA 0:41``."""
+    parts = [STAGE_NAMES.get(status.stage, status.stage.title() or "Working")]
+    if status.total > 1:
+        parts[0] += f" {status.step}/{status.total}"
+    parts.append(f"{status.fraction:.0%}")
+    eta = eta_text(status.eta_s)
+    if eta:
+        parts.append(eta)
+    return " · ".join(parts)
+
+
+def report_rows(report: dict[str, Any] | None, result: str | None) -> list[tuple[str, str]]:
+    """(label, value) rows summarising a run's report."""
+    if not report:
+        return [("Result", result)] if result else []
+    rows = [("Result", result or "-"), ("Time", f"{report['seconds']:.1f} s"),
+            ("Splats", f"{report['n_gaussians']:,}"),
+            ("Views", f"{report['n_views']} at {report['image_size'][0]}×{report['image_size'][1]}"),
+            ("Device", str(report.get("device", "?")))]
+    weights = report.get("weights") or {}
+    rows.append(("Features", ("FALLBACK: " if weights.get("fallback") else "") + str(weights.get("spec", "?"))))
+    metrics = report.get("metrics") or {}
+    if metrics.get("texture_match") is not None and metrics.get("texture_match_start") is not None:
+        rows.append(("Texture Match", f"{metrics['texture_match_start']:.3f} → {metrics['texture_match']:.3f}"))
+    if metrics.get("ssim") is not None:
+        rows.append(("SSIM", f"{metrics['ssim']:.3f}"))
+    return rows
+
+
+def transfer_view(target: str | None, running: JobStatus | None, last: transfer_run.Outcome | None) -> TransferView:
+    """What the panel shows for a target object name (None: no splat selected), the running job's
+    status (None: none runs) and the outcome of the last run."""
+    if running is not None:
+        text = progress_text(running)
+        return TransferView(RUNNING, False, True, running.message or text, ICONS[RUNNING], running.fraction, text)
+    can = target is not None
+    if last is None:
+        message = f"Ready: {target}" if can else "Select a Gaussian splat object"
+        return TransferView(IDLE, can, False, message, ICONS[IDLE])
+    rows = report_rows(last.report, last.result) if last.state == DONE else []
+    message = {DONE: f"Done: {last.message}", CANCELLED: "Cancelled; the scene is unchanged",
+               ERROR: f"Failed: {last.message}"}.get(last.state, last.message)
+    return TransferView(last.state, can, False, message, ICONS.get(last.state, "INFO"), report_rows=rows)
+
+
+def current_view(context) -> TransferView:
+    """``transfer_view`` for the current context."""
+    target = transfer_run.target_object(context)
+    run = transfer_run.ACTIVE.get("transfer")
+    return transfer_view(target.name if target else None, run.job.status if run else None,
+                         transfer_run.OUTCOMES.get("transfer"))
+
+
+class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = CATEGORY
+    bl_label = "Texture Transfer"
+
+    def draw(self, context):
+        layout = self.layout
+        settings = context.scene.gt2gs
+        view = current_view(context)
+        layout.prop(settings, "target")
+        row = layout.row(align=True)
+        row.prop(settings, "texture_source", expand=True)
+        layout.prop(settings, "texture_path" if settings.texture_source == "FILE" else "texture_image", text="")
+        layout.prop(settings, "view_source")
+        if settings.view_source == "AUTO":
+            layout.prop(settings, "n_views")
+        elif settings.view_source == "COLLECTION":
+            layout.prop(settings, "camera_collection", text="")
+        elif settings.view_source == "CAMERAS_JSON":
+            layout.prop(settings, "cameras_json", text="")
+        layout.prop(settings, "preset")
+        row = layout.row(align=True)
+        row.prop(settings, "angle")
+        row.prop(settings, "auto_preview", text="", icon="FILE_REFRESH")
+        layout.prop(settings, "lambda_content")
+        layout.prop(settings, "device")
+        row = layout.row(align=True)
+        row.prop(settings, "result_mode", expand=True)
+        layout.prop(settings, "region_only")
+
+        row = layout.row(align=True)
+        row.operator("gt2gs.preview_orientation", icon="ORIENTATION_GIMBAL")
+        row = layout.row(align=True)
+        row.enabled = view.can_transfer
+        row.operator("gt2gs.transfer_texture", icon="TEXTURE")
+        if view.can_cancel:
+            layout.operator("gt2gs.cancel_transfer", icon="CANCEL")
+        if view.progress is not None:
+            layout.progress(factor=view.progress, type="BAR", text=view.progress_text)
+        layout.label(text=view.message, icon=view.icon)
+        icon = transfer_run.preview_icon()
+        if icon:
+            layout.template_icon(icon_value=icon, scale=10.0)
+        if view.report_rows:
+            column = layout.box().column(align=True)
+            for label, value in view.report_rows:
+                split = column.split(factor=0.4)
+                split.label(text=label)
+                split.label(text=value)
+
+
+class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
+    bl_space_type = "VIEW_3D"
+    bl_region_type = "UI"
+    bl_category = CATEGORY
+    bl_label = "Advanced"
+    bl_parent_id = "VIEW3D_PT_gt2gs_transfer"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        settings = context.scene.gt2gs
+        column = self.layout.column()
+        for name in ("steps", "resolution", "n_angles", "seed", "color_transfer", "depth_groups"):
+            column.prop(settings, name)
+
+
+classes = (VIEW3D_PT_gt2gs_transfer, VIEW3D_PT_gt2gs_advanced)
+
+
+def register() -> None:
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)
