@@ -53,6 +53,7 @@ def test_build_ships_the_package_and_nothing_else(built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
     assert built_zip.name == "gt2gs_blender-0.1.0.zip"
     for required in ("blender_manifest.toml", "__init__.py", "operators/io_import.py", "operators/io_export.py",
+                     "operators/transfer.py", "core/worker.py", "batch.py",
                      "panels/sidebar.py", "blender/splats.py", "core/ply.py",
                      "core/rasterizer/csrc/raster_cpu.cpp"):  # the C++ source is compiled at run time
         assert required in names, required
@@ -81,13 +82,22 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
         report["enabled"] = module in bpy.context.preferences.addons
         report["loaded_from"] = sys.modules[module].__file__
         report["operators"] = [hasattr(bpy.types, c) for c in
-                               ("GT2GS_OT_import_ply", "GT2GS_OT_export_ply", "GT2GS_FH_ply", "VIEW3D_PT_gt2gs_splat")]
+                               ("GT2GS_OT_import_ply", "GT2GS_OT_export_ply", "GT2GS_FH_ply", "VIEW3D_PT_gt2gs_splat",
+                                "GT2GS_OT_transfer_texture", "GT2GS_OT_preview_orientation", "VIEW3D_PT_gt2gs_transfer")]
+        report["preferences"] = bpy.context.preferences.addons[module].preferences.device
         donut = {str(DONUT)!r}
         if {DONUT.is_file()!r}:
             bpy.ops.gt2gs.import_ply(filepath=donut)
             obj = bpy.context.active_object
             report["imported"] = [obj.type, len(obj.data.points)]
             report["engine_module"] = [m for m in sys.modules if m.endswith("gt2gs_blender.core.ply")]
+            # the worker process runs from the installed copy (its folder on the worker's PYTHONPATH): given
+            # a "texture" that is no image, it gets as far as decoding it (a real run would also compile
+            # the installed copy's C++ rasterizer, minutes on a busy machine)
+            try:
+                bpy.ops.gt2gs.preview_orientation(texture_path=donut, n_views=2)
+            except RuntimeError as exc:
+                report["worker_error"] = str(exc)
         addon_utils.disable(module, default_set=True, handle_error=None)
         report["disabled"] = module not in bpy.context.preferences.addons
         report["after_disable"] = [hasattr(bpy.types, c) for c in ("GT2GS_OT_import_ply", "VIEW3D_PT_gt2gs_splat")]
@@ -103,9 +113,10 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
 
     assert report["enabled"]
     assert Path(report["loaded_from"]).resolve() == (repo / "gt2gs_blender" / "__init__.py").resolve()
-    assert report["operators"] == [True, True, True, True]
+    assert report["operators"] == [True] * 7 and report["preferences"] == "AUTO"
     if DONUT.is_file():
         assert report["imported"] == ["POINTCLOUD", DONUT_COUNT]
         assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.ply"]
+        assert "point_cloud.ply" in report["worker_error"] and "texture" in report["worker_error"]
     assert report["disabled"]
     assert report["after_disable"] == [False, False]
