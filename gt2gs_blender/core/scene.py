@@ -15,6 +15,10 @@ import torch
 SH_C0 = 0.28209479177387814
 """Degree-0 real spherical-harmonic constant: colour = 0.5 + SH_C0 * f_dc."""
 
+LOG_SCALE_MAX = 88.0
+"""Log-scales are clamped here before ``exp``: exp(88) ~ 1.7e38 is the largest float32 power of e, so a
+scale never overflows to Inf (whose gradient, 0 * Inf, would be NaN)."""
+
 
 def sh_coeff_count(degree: int) -> int:
     """Number of SH coefficients per colour channel for a degree (1, 4, 9, 16)."""
@@ -117,7 +121,8 @@ class GaussianScene:
     # -- activations --------------------------------------------------------------------------------
     @property
     def scales(self) -> torch.Tensor:
-        return torch.exp(self.log_scales)
+        """Linear scales, finite for any finite log-scale (see ``LOG_SCALE_MAX``)."""
+        return torch.exp(self.log_scales.clamp(max=LOG_SCALE_MAX))
 
     @property
     def opacities(self) -> torch.Tensor:
@@ -209,12 +214,20 @@ def concat(scenes: Iterable[GaussianScene]) -> GaussianScene:
 
 
 def normalize_quats(quats: torch.Tensor) -> torch.Tensor:
-    """Unit quaternions; zero or non-finite-norm ones become the identity (1, 0, 0, 0)."""
-    norm = quats.norm(dim=-1, keepdim=True)
-    ok = norm > 1e-12
+    """Unit quaternions; zero or non-finite ones become the identity (1, 0, 0, 0), with zero gradient.
+
+    Non-finite quaternions are replaced before any arithmetic (a masked-out Inf would still make the
+    gradient 0 * Inf = NaN), and each one is divided by its largest component before the norm, so
+    float32 quaternions as large as 1e38 (whose squared norm overflows) still normalise correctly.
+    """
     identity = torch.zeros_like(quats)
     identity[..., 0] = 1.0
-    return torch.where(ok, quats / norm.clamp_min(1e-12), identity)
+    finite = torch.where(torch.isfinite(quats).all(dim=-1, keepdim=True), quats, identity)
+    largest = finite.abs().amax(dim=-1, keepdim=True).clamp_min(torch.finfo(quats.dtype).tiny)
+    unit_max = finite / largest
+    norm = unit_max.norm(dim=-1, keepdim=True)
+    ok = norm * largest > 1e-12
+    return torch.where(ok, unit_max / norm.clamp_min(1e-12), identity)
 
 
 def quats_to_rotmats(quats: torch.Tensor) -> torch.Tensor:

@@ -47,11 +47,20 @@ def _covariances_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
     return m @ m.transpose(1, 2)
 
 
-def _visible_pairs(p_cam: torch.Tensor, opacities: torch.Tensor, near: float, far: float) -> torch.Tensor:
-    """(camera, Gaussian) index pairs in front of the near plane with a chance of alpha >= 1/255."""
+def _visible_pairs(
+    p_cam: torch.Tensor, ks: torch.Tensor, gaussians_ok: torch.Tensor, near: float, far: float,
+) -> torch.Tensor:
+    """(camera, Gaussian) index pairs in front of the near plane with a chance of alpha >= 1/255.
+
+    Pairs whose 2D mean is not a finite float (a mean far off to the side: fx * x / z overflows) are
+    dropped here, before the differentiable chain: culled later, their 0 gradient would meet the
+    Inf and become NaN. ``gaussians_ok`` (N,) marks Gaussians with usable opacity, scale and rotation.
+    """
     z = p_cam[..., 2]
-    ok = (z > near) & (z < far) & (opacities >= ALPHA_MIN)[None, :] & torch.isfinite(p_cam).all(-1)
-    return ok.nonzero()
+    ok = (z > near) & (z < far) & gaussians_ok[None, :] & torch.isfinite(p_cam).all(-1)
+    with torch.no_grad():
+        uv = p_cam[..., :2] * ks[:, None, [0, 1], [0, 1]] / z[..., None] + ks[:, None, [0, 1], [2, 2]]
+    return (ok & torch.isfinite(uv).all(-1)).nonzero()
 
 
 def _jacobians(p: torch.Tensor, k: torch.Tensor, width: int, height: int) -> torch.Tensor:
@@ -105,15 +114,18 @@ def project(
     """Cull, project and colour every (camera, Gaussian) pair; see the module docstring."""
     rot, trans = viewmats[:, :3, :3], viewmats[:, :3, 3]
     p_cam_all = torch.einsum("bij,nj->bni", rot, means) + trans[:, None, :]
-    pairs = _visible_pairs(p_cam_all.detach(), opacities.detach(), near_plane, far_plane)
+    with torch.no_grad():
+        gaussians_ok = (opacities >= ALPHA_MIN) & torch.isfinite(scales).all(-1) & torch.isfinite(quats).all(-1)
+    pairs = _visible_pairs(p_cam_all.detach(), ks, gaussians_ok, near_plane, far_plane)
     cam_ids, gauss_ids = pairs[:, 0], pairs[:, 1]
     p_cam = p_cam_all[cam_ids, gauss_ids]
     k = ks[cam_ids]
     # The covariance chain runs in float64: det = ac - b^2 cancels catastrophically in float32 for
-    # needle-like Gaussians (1000:1 scales), and the extra cost is a few small matrix products.
+    # needle-like Gaussians (1000:1 scales), and the extra cost is a few small matrix products. It
+    # runs on the visible entries only, so Gaussians culled for non-finite values never enter it.
     f64 = torch.float64
     jac = _jacobians(p_cam.to(f64), k.to(f64), width, height) @ rot[cam_ids].to(f64)
-    cov2d = jac @ _covariances_3d(quats.to(f64), scales.to(f64))[gauss_ids] @ jac.transpose(1, 2)
+    cov2d = jac @ _covariances_3d(quats[gauss_ids].to(f64), scales[gauss_ids].to(f64)) @ jac.transpose(1, 2)
     a = cov2d[:, 0, 0] + EPS2D
     b = cov2d[:, 0, 1]
     c = cov2d[:, 1, 1] + EPS2D
