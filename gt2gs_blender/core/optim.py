@@ -3,11 +3,13 @@
 What torch.optim.Adam cannot do for us: (1) freeze individual Gaussians so that they come out
 bit-identical (Adam with a zero gradient still moves a parameter that has momentum, so frozen rows
 are excluded from the update itself); (2) follow structure changes (densify, prune) row by row,
-keeping survivors' moments and giving new Gaussians zero moments; (3) skip a step whose gradient is
-not finite instead of spreading NaNs into the scene.
+keeping survivors' moments and giving new Gaussians zero moments; (3) skip a step whose loss,
+gradient or update is not finite instead of spreading NaNs into the scene, log it, and halve the
+learning rates when such steps repeat (:class:`StepGuard`, usable with any optimiser).
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, replace
 from typing import Iterable
@@ -17,6 +19,12 @@ import torch
 from .scene import GaussianScene
 
 PARAM_NAMES = ("means", "quats", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
+BACKOFF_AFTER = 3
+"""Consecutive skipped steps after which the learning rates are halved."""
+MIN_LR_SCALE = 2.0 ** -10
+"""The learning-rate multiplier never backs off below this (1/1024)."""
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -51,6 +59,44 @@ def rows_like(mask: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     return mask.reshape(-1, *([1] * (t.dim() - 1)))
 
 
+class StepGuard:
+    """Decides whether an optimisation step may run: not when the loss or a gradient is NaN/Inf.
+
+    Each skipped step is logged (warning) and counted; after ``backoff_after`` consecutive skips the
+    learning-rate multiplier ``lr_scale`` is halved (down to ``MIN_LR_SCALE``, logged), since a step
+    that keeps blowing up usually means a step size that is too large. A taken step resets the run
+    of skips but not ``lr_scale``.
+    """
+
+    def __init__(self, backoff_after: int = BACKOFF_AFTER) -> None:
+        self.backoff_after = backoff_after
+        self.lr_scale = 1.0
+        self.skipped = 0
+        self.consecutive = 0
+
+    def allow(self, loss: torch.Tensor | float | None, grads: dict[str, torch.Tensor | None]) -> bool:
+        """True when ``loss`` and every gradient are finite; otherwise record a skipped step."""
+        value = float(loss.detach()) if isinstance(loss, torch.Tensor) else loss
+        if value is not None and not math.isfinite(value):
+            return self.skip(f"the loss is {value}")
+        bad = [name for name, g in grads.items() if g is not None and not bool(torch.isfinite(g).all())]
+        if bad:
+            return self.skip(f"non-finite gradient of {', '.join(bad)}")
+        self.consecutive = 0
+        return True
+
+    def skip(self, reason: str) -> bool:
+        """Record a skipped step (always False), backing off the learning rate when skips repeat."""
+        self.skipped += 1
+        self.consecutive += 1
+        log.warning("optimisation step skipped: %s (%d skipped so far)", reason, self.skipped)
+        if self.consecutive % self.backoff_after == 0 and self.lr_scale > MIN_LR_SCALE:
+            self.lr_scale = max(self.lr_scale * 0.5, MIN_LR_SCALE)
+            log.warning("%d steps in a row were not finite: learning rates scaled to %g of their schedule",
+                        self.consecutive, self.lr_scale)
+        return False
+
+
 class GaussianAdam:
     """Adam (eps 1e-15 as in 3DGS) over ``scene``'s tensors.
 
@@ -78,7 +124,7 @@ class GaussianAdam:
         self.exp_avg = {k: torch.zeros_like(v) for k, v in self.scene.tensors().items()}
         self.exp_avg_sq = {k: torch.zeros_like(v) for k, v in self.scene.tensors().items()}
         self.steps = 0
-        self.skipped = 0
+        self.guard = StepGuard()
 
     # -- training -----------------------------------------------------------------------------------
     def set_trainable(self, names: Iterable[str]) -> None:
@@ -90,34 +136,45 @@ class GaussianAdam:
         for t in self.scene.tensors().values():
             t.grad = None
 
+    @property
+    def skipped(self) -> int:
+        """Steps skipped because the loss, a gradient or an update was not finite."""
+        return self.guard.skipped
+
     def grads_finite(self) -> bool:
         """Whether every trainable tensor's gradient is finite (a missing gradient counts as zero)."""
         return all(t.grad is None or bool(torch.isfinite(t.grad).all()) for t in self._trained().values())
 
     def step(self, loss: torch.Tensor | None = None) -> bool:
-        """One Adam update of the trainable tensors on the unfrozen rows; False (and counted in
-        ``skipped``) when ``loss`` or a gradient is not finite, in which case nothing changes."""
-        if (loss is not None and not bool(torch.isfinite(loss))) or not self.grads_finite():
-            self.skipped += 1
+        """One Adam update of the trainable tensors on the unfrozen rows, at the learning rates times
+        ``guard.lr_scale``. False (counted in ``skipped``, logged) when ``loss``, a gradient or the
+        update is not finite, in which case nothing changes: the scene never receives NaN or Inf."""
+        if not self.guard.allow(loss, {k: v.grad for k, v in self._trained().items()}):
             return False
-        self.steps += 1
         b1, b2 = self.betas
-        bc1, bc2 = 1.0 - b1 ** self.steps, 1.0 - b2 ** self.steps
+        bc1, bc2 = 1.0 - b1 ** (self.steps + 1), 1.0 - b2 ** (self.steps + 1)
         active = ~self.frozen
         any_frozen = bool(self.frozen.any())
+        pending: dict[str, tuple[torch.Tensor, ...]] = {}
         with torch.no_grad():
             for name, param in self._trained().items():
                 grad = torch.zeros_like(param) if param.grad is None else param.grad
                 m = self.exp_avg[name] * b1 + grad * (1.0 - b1)
                 v = self.exp_avg_sq[name] * b2 + grad * grad * (1.0 - b2)
-                update = (m / bc1) / ((v / bc2).sqrt() + self.eps) * self.lrs[name]
+                update = (m / bc1) / ((v / bc2).sqrt() + self.eps) * (self.lrs[name] * self.guard.lr_scale)
                 if any_frozen:
                     keep = rows_like(active, param)
                     m = torch.where(keep, m, self.exp_avg[name])
                     v = torch.where(keep, v, self.exp_avg_sq[name])
                     update = torch.where(keep, update, torch.zeros_like(update))
+                new = param - update
+                if not bool(torch.isfinite(new).all()):
+                    return self.guard.skip(f"the update of {name} is not finite")
+                pending[name] = (param, m, v, new)
+            for name, (param, m, v, new) in pending.items():
                 self.exp_avg[name], self.exp_avg_sq[name] = m, v
-                param.sub_(update)
+                param.copy_(new)
+        self.steps += 1
         return True
 
     # -- structure changes --------------------------------------------------------------------------
