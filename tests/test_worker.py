@@ -26,6 +26,13 @@ TINY = dict(resolution=48, n_views=3, stylise_steps=6, n_scales=2, n_angles=4, t
             preview_every=2)
 
 
+def colours_differ(a: np.ndarray, b: np.ndarray, tol: float = 0.02) -> bool:
+    """Whether DC colours (N,3) changed: per Gaussian when the counts match, else (densified) on average."""
+    if a.shape == b.shape:
+        return float(np.abs(a - b).mean()) > tol
+    return float(np.abs(a.mean(axis=0) - b.mean(axis=0)).max()) > tol
+
+
 @pytest.fixture
 def job(tmp_path):
     """A job whose inputs (a small scene and a stripe texture) are in its folder; cleaned up afterwards."""
@@ -68,7 +75,7 @@ def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
     assert Path(status.preview).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert status.report["n_views"] == 3 and status.report["config"]["stylise_steps"] == 6
     original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
-    assert len(result) == len(original) and not np.allclose(result.sh_dc, original.sh_dc)
+    assert colours_differ(result.sh_dc, original.sh_dc)
     assert not [p for p in job.folder.rglob("*.tmp")]
 
 

@@ -216,7 +216,7 @@ class TransferRun:
             job.start(spec)
         except BaseException as exc:
             job.cleanup()
-            if isinstance(exc, (splats.SplatObjectError, OSError)):
+            if isinstance(exc, (splats.SplatObjectError, OSError, ValueError)):
                 raise RunError(str(exc)) from None
             raise
         run = cls(job, kind, obj.name, settings.result_mode)

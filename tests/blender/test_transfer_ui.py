@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import glob
+import inspect
 import os
 import signal
 import sys
@@ -20,10 +21,12 @@ from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, Job
 from gt2gs_blender.core import deps  # noqa: E402
 from gt2gs_blender.core.cameras import load_cameras_json  # noqa: E402
 from gt2gs_blender.core.ply import write_ply  # noqa: E402
+from gt2gs_blender.core.transfer import transfer  # noqa: E402
 from gt2gs_blender.core.worker import write_png  # noqa: E402
 from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view  # noqa: E402
 
 from ..test_transfer import blob_scene, stripes  # noqa: E402
+from ..test_worker import colours_differ  # noqa: E402
 from .conftest import SHARED  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -97,8 +100,7 @@ def test_transfer_operator_headless_adds_a_new_object(blob):
     assert bpy.ops.gt2gs.transfer_texture(preset="preview", n_views=3) == {"FINISHED"}
     result = bpy.context.active_object
     assert result.name == "blob GT²" and splats.is_splat_object(result)
-    assert len(result.data.points) == len(blob.data.points)
-    assert not np.allclose(dc(result), original)
+    assert colours_differ(dc(result), original)
     assert np.array_equal(dc(blob), original)
     after = snapshot()
     assert all(np.array_equal(after[k], v) for k, v in before.items() if k not in ("objects", "clouds"))
@@ -112,7 +114,7 @@ def test_transfer_in_place_replaces_the_splats(blob):
     names, original = sorted(o.name for o in bpy.data.objects), dc(blob)
     assert bpy.ops.gt2gs.transfer_texture() == {"FINISHED"}
     assert sorted(o.name for o in bpy.data.objects) == names
-    assert not np.allclose(dc(bpy.data.objects["blob"]), original)
+    assert colours_differ(dc(bpy.data.objects["blob"]), original)
     assert len(bpy.data.pointclouds) == 1 and "UNDO" in bpy.types.GT2GS_OT_transfer_texture.bl_options
 
 
@@ -182,9 +184,6 @@ def test_region_uses_the_point_selection(blob):
     run = transfer_run.TransferRun.start(bpy.context, {})
     assert np.array_equal(np.load(run.job.path("region.npy")), np.flatnonzero(mask))
     status = tick_until(run, lambda s: s.finished)
-    from gt2gs_blender.core.transfer import transfer
-    import inspect
-
     if "region" in inspect.signature(transfer).parameters:
         assert status.state == DONE
     else:  # the engine's region support lands separately: until then the run says so
@@ -307,10 +306,9 @@ def test_preview_preset_on_the_shared_donut(fresh, donut, monkeypatch):
     assert fresh.ops.gt2gs.transfer_texture(texture_path=TEXTURES[0], preset="preview") == {"FINISHED"}
     seconds = time.perf_counter() - started
     result = fresh.context.active_object
-    assert result != source and len(result.data.points) == len(source.data.points)
-    assert np.abs(dc(result) - original).mean() > 0.05
+    assert result != source and colours_differ(dc(result), original, tol=0.05)
     assert np.array_equal(dc(source), original)
     report = transfer_run.OUTCOMES["transfer"].report
-    assert report["weights"]["fallback"] is False and report["n_gaussians"] == 45624
+    assert report["weights"]["fallback"] is False
     print(f"donut preview preset through the operator: {seconds:.1f} s")
     transfer_run.OUTCOMES.clear()
