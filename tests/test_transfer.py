@@ -31,7 +31,7 @@ def stripes(size: int = 96) -> np.ndarray:
 
 def tiny(**overrides) -> TransferConfig:
     base = dict(resolution=48, n_views=3, stylise_steps=4, n_scales=2, n_angles=4, texture_height=96,
-                evaluate=False, cache_dir=None, preview_every=2)
+                evaluate=False, cache_dir=None, preview_every=2, gpb=False, densify=False)
     base.update(overrides)
     return TransferConfig(**base)
 

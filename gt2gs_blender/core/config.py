@@ -22,6 +22,21 @@ class TransferConfig:
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
     color_transfer: bool = True      # ARF colour transfer before and after stylisation
     angle: float = 0.0               # orientation control: the texture's angle in the first view (degrees)
+    gt2: bool = True                 # GT² loss: targets guided by angles carried across views (False = NNFM)
+    lambda_prior: float = 0.01       # prior angle cost per degree (authors' code: 100 = a hard constraint)
+    afcm: bool = True                # Adaptive Fine-grained Control Module weights per feature cell
+    lambda_depth: float = 0.8        # AFCM {lambda_d, lambda_f, lambda_phi} (paper 0.8, 0.8, 0.25)
+    lambda_frequency: float = 0.8
+    lambda_distortion: float = 0.25
+    gpb: bool = True                 # Geometry Preservation Branch: correction phases between stylise phases
+    rounds: int = 4                  # stylise/correct alternations (the steps are split evenly)
+    correct_steps: int = 100         # GPB correction steps in all (geometry vs content images)
+    lambda_scale: float = 0.1        # scale regulariser weight in the correction phases (paper 0.1)
+    scale_ratio_limit: float = 10.0  # largest/second scale ratio tolerated before it is penalised (authors: 1)
+    densify: bool = True             # clone/split by the DC-colour gradient in the first half of the rounds
+    densify_every: int = 25          # stylise steps between densification events
+    densify_grad_threshold: float = 2e-4  # mean |dL/d f_dc| that makes a Gaussian grow
+    densify_max_growth: float = 1.5  # no densification once the scene has grown by this factor
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     features: str = "auto"           # feature network preference (see features.load_feature_extractor)
     weights_path: str | None = None  # explicit weights file or folder
@@ -33,12 +48,14 @@ class TransferConfig:
     cache_dir: str | None = None     # texture-bank cache (default: ~/.cache/gt2gs_blender/banks)
 
     def __post_init__(self) -> None:
-        positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every")
+        positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every", "rounds",
+                    "densify_every")
         for name in positive:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.stylise_steps < 0 or self.lr <= 0:
-            raise ValueError(f"need stylise_steps >= 0 and lr > 0, got {self.stylise_steps}, {self.lr}")
+        if self.stylise_steps < 0 or self.correct_steps < 0 or self.lr <= 0:
+            raise ValueError(f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
+                             f"{self.correct_steps}, {self.lr}")
         if self.device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
 

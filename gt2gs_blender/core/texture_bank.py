@@ -311,7 +311,7 @@ def depth_groups(
     return torch.where(covered, groups, torch.full_like(groups, -1))
 
 
-def _pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: torch.device) -> torch.Tensor:
+def pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: torch.device) -> torch.Tensor:
     """Index (H*W,) of the feature cell each pixel falls in, on an (h, w) grid over an (H, W) image."""
     h, w = feature_hw
     rows = torch.arange(height, device=device) * h // height
@@ -326,7 +326,7 @@ def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: f
     and on a small object they would otherwise outnumber the object's cells."""
     *lead, height, width = alpha.shape
     h, w = feature_hw
-    cell = _pixel_cells(height, width, feature_hw, alpha.device)
+    cell = pixel_cells(height, width, feature_hw, alpha.device)
     flat = (alpha >= min_alpha).reshape(-1, height * width).double()
     covered = torch.zeros(flat.shape[0], h * w, dtype=flat.dtype, device=alpha.device).index_add_(1, cell, flat)
     total = torch.bincount(cell, minlength=h * w).to(flat)
@@ -340,7 +340,7 @@ def cell_groups(groups: torch.Tensor, feature_hw: tuple[int, int]) -> torch.Tens
     *lead, height, width = groups.shape
     h, w = feature_hw
     n_classes = int(groups.max()) + 2 if groups.numel() else 1
-    cell = _pixel_cells(height, width, feature_hw, groups.device)
+    cell = pixel_cells(height, width, feature_hw, groups.device)
     flat = groups.reshape(-1, height * width) + 1
     batch = torch.arange(flat.shape[0], device=groups.device)[:, None]
     index = (batch * (h * w) + cell[None, :]) * n_classes + flat

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 import torch
@@ -22,11 +22,23 @@ from .cameras import Camera, auto_views
 from .config import TransferConfig
 from .errors import GT2GSError
 from .features import FeatureExtractor, load_feature_extractor
-from .losses import content_loss, nnfm_loss, tv_loss
 from .rasterizer import render
-from .scene import GaussianScene
+from .scene import GaussianScene, concat
+from .stylise import (
+    Styliser,
+    StyliseStats,
+    ViewTargets,
+    frequency_levels,
+    order_and_link,
+)
 from .texture import load_texture
-from .texture_bank import TextureBank, build_texture_bank, cell_groups, covered_cells, depth_groups
+from .texture_bank import (
+    TextureBank,
+    build_texture_bank,
+    cell_groups,
+    covered_cells,
+    depth_groups,
+)
 
 BANK_MAX_CROP = 64
 """Texture crops are capped at 64 px: the kept centre cells are then identical (tested), 3-4x faster."""
@@ -155,10 +167,19 @@ def _cache_dir(config: TransferConfig) -> Path:
     return Path(config.cache_dir) if config.cache_dir else Path.home() / ".cache" / "gt2gs_blender" / "banks"
 
 
-def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarray) -> GaussianScene:
-    """ARF colour transfer fitted on the covered pixels of the views, applied exactly in SH space."""
-    matrix, offset = color_transfer.fit_color_transform(views.premultiplied, texture, weights=views.alphas)
-    return color_transfer.apply_to_scene(scene, matrix, offset)
+def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarray,
+                         rows: torch.Tensor | None = None, backend: str = "auto") -> GaussianScene:
+    """ARF colour transfer fitted on the covered pixels of the views, applied exactly in SH space;
+    with ``rows`` (a bool mask) fitted on the pixels those Gaussians cover and applied to them only."""
+    weights = views.alphas
+    if rows is not None:
+        weights = render_views(scene.subset(rows), views.cameras, views.background, backend).alphas
+    matrix, offset = color_transfer.fit_color_transform(views.premultiplied, texture, weights=weights)
+    moved = color_transfer.apply_to_scene(scene, matrix, offset)
+    if rows is None:
+        return moved
+    return replace(scene, sh_dc=torch.where(rows[:, None], moved.sh_dc, scene.sh_dc),
+                   sh_rest=torch.where(rows[:, None, None], moved.sh_rest, scene.sh_rest))
 
 
 def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig, device: torch.device,
@@ -176,58 +197,47 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
     ).to(device)
 
 
-@dataclass
-class StyleTargets:
-    """Per view: content features of the colour-transferred original, the feature cells the object
-    covers (the only ones the texture loss counts) and the depth group per feature cell."""
-
-    content_features: list[torch.Tensor]
-    cell_masks: list[torch.Tensor]
-    cell_groups: list[torch.Tensor | None]
-
-
 @torch.no_grad()
-def style_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig,
-                  backend: str) -> StyleTargets:
-    """Features of the starting scene's renders (content term) and each cell's depth group."""
+def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig,
+                 backend: str) -> list[ViewTargets]:
+    """Per view: the content image (the colour-transferred start's render) and its features, the
+    covered cells, each cell's depth group and the AFCM frequency level."""
     start_views = render_views(start, views.cameras, views.background, backend)
-    feats = [extractor(_to_nchw(start_views.composited(v))) for v in range(len(views.cameras))]
+    images = [start_views.composited(v) for v in range(len(views.cameras))]
+    feats = [extractor(_to_nchw(image)) for image in images]
     masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
     groups: list[torch.Tensor | None] = [None] * len(feats)
     if config.depth_groups and config.n_scales > 1:
         # all views at once, so a surface falls in the same depth group in every view
         pixel_groups = depth_groups(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
         groups = [cell_groups(pixel_groups[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
-    return StyleTargets(feats, masks, groups)
+    levels = frequency_levels(images, masks)
+    return [ViewTargets(cam, image, f, m, g, level)
+            for cam, image, f, m, g, level in zip(views.cameras, images, feats, masks, groups, levels)]
 
 
-def stylise(scene: GaussianScene, views: ViewSet, bank: TextureBank, extractor: FeatureExtractor,
-            targets: StyleTargets, config: TransferConfig, tracker: _Tracker) -> GaussianScene:
-    """Optimise the DC colours so each view's features match the texture bank (NNFM, paper Eq. 3)."""
-    sh_dc = scene.sh_dc.detach().clone().requires_grad_(True)
-    optimiser = torch.optim.Adam([sh_dc], lr=config.lr)
-    generator = torch.Generator().manual_seed(config.seed)
-    order: list[int] = []
-    for step in range(config.stylise_steps):
-        tracker.check_cancel()
-        if not order:
-            order = torch.randperm(len(views.cameras), generator=generator).tolist()
-        v = order.pop()
-        out = render(replace(scene, sh_dc=sh_dc), [views.cameras[v]], background=views.background,
-                     backend=config.backend, render_depth=False)
-        image = out.colors[0]
-        feats = extractor(_to_nchw(image))
-        style = nnfm_loss(feats, bank.features, mask=targets.cell_masks[v], groups=targets.cell_groups[v],
-                          bank_groups=bank.k)
-        loss = (config.lambda_style * style.loss + config.lambda_content * content_loss(feats, targets.content_features[v])
-                + config.lambda_tv * tv_loss(image[None]))
-        optimiser.zero_grad(set_to_none=True)
-        loss.backward()
-        if torch.isfinite(sh_dc.grad).all():
-            optimiser.step()
-        preview = _preview(image) if step % config.preview_every == 0 else None
-        tracker.tell(step + 1, config.stylise_steps, f"stylise: texture loss {float(style.loss.detach()):.3f}", preview)
-    return replace(scene, sh_dc=sh_dc.detach())
+def stylise(scene: GaussianScene, views: ViewSet, targets: list[ViewTargets], bank: TextureBank,
+            extractor: FeatureExtractor, config: TransferConfig, tracker: _Tracker,
+            frozen: torch.Tensor | None) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats]:
+    """Run the stylise/correct schedule (module ``stylise``), reporting progress and previews; the
+    scene, its frozen rows (after densification) and the counts."""
+    order = order_and_link(targets, views.depths, views.alphas)
+    styliser = Styliser(scene, targets, order, bank, extractor, config, views.background, frozen)
+    phases = styliser.phases()
+    total, step = sum(n for _, n, _ in phases), 0
+    for phase, steps, densify in phases:
+        for _ in range(steps):
+            tracker.check_cancel()
+            if phase == "stylise":
+                loss, image = styliser.stylise_step(densify)
+                preview = _preview(image) if styliser.report.stylise_steps % config.preview_every == 1 else None
+                message = f"stylise: texture loss {loss:.3f}, {len(styliser.scene):,} Gaussians"
+            else:
+                loss, preview = styliser.correct_step(), None
+                message = f"preserve geometry: loss {loss:.4f}"
+            step += 1
+            tracker.tell(step, total, message, preview)
+    return styliser.scene.detach(), None if frozen is None else styliser.opt.frozen.clone(), styliser.report
 
 
 def transfer(
@@ -236,14 +246,18 @@ def transfer(
     views: Sequence[Camera] | int | None = None,
     config: TransferConfig | None = None,
     *,
+    region: torch.Tensor | np.ndarray | None = None,
     progress: Callable[[Progress], None] | None = None,
     cancel: Callable[[], bool] | None = None,
 ) -> TransferResult:
     """Re-texture ``scene`` with ``texture`` (a path or an (H,W,3) float array in [0,1]).
 
-    ``views``: cameras, a number of automatic views, or None for the config's count. The input
-    scene is not modified; the result keeps its extras and is view-independent (SH degree 0, as
-    in the paper's code). Raises ``Cancelled`` when ``cancel()`` returns True.
+    ``views``: cameras, a number of automatic views, or None for the config's count. ``region``: a
+    bool mask (N,) or an index array of the Gaussians to restyle; the others come out bit-identical,
+    first and in their original order, followed by the restyled ones (and any densified). The input
+    scene is not modified. The restyled Gaussians are view-independent (no SH bands above 0, as in
+    the paper's code); without a region the whole result has SH degree 0. Raises ``Cancelled``
+    when ``cancel()`` returns True.
     """
     config = config or TransferConfig()
     tracker = _Tracker(progress, cancel)
@@ -253,14 +267,16 @@ def transfer(
     tracker.begin("prepare")
     image = _load_texture(texture)
     original = scene.detach().to(device)
-    cameras = fit_cameras(original, views, config.resolution, config.n_views)
+    selected = region_mask(region, len(original), device)
+    cameras = fit_cameras(original if selected is None else original.subset(selected), views, config.resolution,
+                          config.n_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     content = render_views(original, cameras, background, config.backend)
-    work = original.with_sh_degree(0)
+    work = original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
     if config.color_transfer:
-        work = apply_color_transfer(work, content, image)
+        work = apply_color_transfer(work, content, image, selected, config.backend)
     extractor = load_feature_extractor(config.features, config.weights_path, device)
-    targets = style_targets(content, work, extractor, config, config.backend)
+    targets = view_targets(content, work, extractor, config, config.backend)
     tracker.end()
 
     tracker.begin("bank")
@@ -268,21 +284,52 @@ def transfer(
     tracker.end()
 
     tracker.begin("stylise")
-    work = stylise(work, content, bank, extractor, targets, config, tracker)
+    frozen = None if selected is None else ~selected
+    work, frozen, stats = stylise(work, content, targets, bank, extractor, config, tracker, frozen)
     tracker.end()
 
     tracker.begin("finish")
+    restyled = None if frozen is None else ~frozen
     if config.color_transfer:
-        work = apply_color_transfer(work, render_views(work, cameras, background, config.backend), image)
+        stylised_views = render_views(work, cameras, background, config.backend)
+        work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
+    if frozen is not None:
+        work = concat([work.subset(frozen), work.subset(~frozen)])
     metrics = _evaluate(work, content, targets, bank, extractor, config) if config.evaluate else None
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
+    report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
+                         "region": None if selected is None else int(selected.sum())}
     tracker.tell(1, 1, "done")
     return TransferResult(scene=work.to("cpu"), report=report)
 
 
+def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.device) -> torch.Tensor | None:
+    """The region as a bool mask (n,) on ``device`` (from a mask or an index array); None = everything."""
+    if region is None:
+        return None
+    region = torch.as_tensor(np.asarray(region) if not isinstance(region, torch.Tensor) else region)
+    if region.dtype == torch.bool:
+        if region.shape != (n,):
+            raise GT2GSError(f"the region mask has {tuple(region.shape)} entries for a scene of {n} Gaussians")
+        mask = region
+    else:
+        index = region.long().reshape(-1)
+        if len(index) and (int(index.min()) < 0 or int(index.max()) >= n):
+            raise GT2GSError(f"region indices must lie in [0, {n}), got {int(index.min())}..{int(index.max())}")
+        mask = torch.zeros(n, dtype=torch.bool).index_fill_(0, index, True)
+    if not bool(mask.any()):
+        raise GT2GSError("the region is empty: select at least one Gaussian to restyle")
+    return mask.to(device)
+
+
+def _without_rest(scene: GaussianScene, rows: torch.Tensor) -> GaussianScene:
+    """The scene with the SH bands above 0 of ``rows`` zeroed (restyled Gaussians are view-independent)."""
+    return replace(scene, sh_rest=torch.where(rows[:, None, None], torch.zeros_like(scene.sh_rest), scene.sh_rest))
+
+
 @torch.no_grad()
-def _evaluate(result: GaussianScene, content: ViewSet, targets: StyleTargets, bank: TextureBank,
+def _evaluate(result: GaussianScene, content: ViewSet, targets: list[ViewTargets], bank: TextureBank,
               extractor: FeatureExtractor, config: TransferConfig) -> dict:
     """The paper's metrics on the run's views, and texture match of the colour-transferred start
     (whose features are the content targets already computed)."""
@@ -299,7 +346,7 @@ def _evaluate(result: GaussianScene, content: ViewSet, targets: StyleTargets, ba
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
                        lpips=lpips, extractor=extractor, bank_features=bank.features)
-    start_features = torch.cat([f[0].flatten(1).T[m.flatten()] for f, m in zip(targets.content_features, targets.cell_masks)])
+    start_features = torch.cat([t.content_features[0].flatten(1).T[t.mask.flatten()] for t in targets])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 

@@ -1,0 +1,202 @@
+"""The optimisation of a texture transfer: stylise phases (GT² loss, AFCM) alternating with the
+Geometry Preservation Branch's correction phases, with densification early on (paper §3.2-3.4).
+
+Stylise phase: only the DC colours learn. Views are visited in the GT² order; each view's feature
+cells get targets from the texture bank guided by the prior angles carried from the previous view
+(the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
+In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
+Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and
+only their geometry learns, against the content images, with the 3DGS reconstruction loss and the
+scale regulariser, so what the texture loss bent out of shape goes back.
+Gaussians outside the region never change (the optimiser's frozen rows).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from .afcm import (
+    AFCMWeights,
+    afcm_weight,
+    depth_level,
+    high_frequency_energy,
+    normalise_frequency,
+)
+from .cameras import Camera
+from .config import TransferConfig
+from .densify import DensifyConfig, DensityStats, densify_and_prune
+from .features import FeatureExtractor
+from .fit import camera_extent, reconstruction_loss
+from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
+from .losses import content_loss, cosine_distance, scale_regulariser, tv_loss
+from .optim import GaussianAdam, LearningRates
+from .rasterizer import render
+from .scene import GaussianScene
+from .texture_bank import TextureBank
+
+GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
+"""The tensors the correction phases train."""
+COLOR_ATTACHMENT = "c_g"
+
+
+@dataclass
+class ViewTargets:
+    """What the stylise phases need of one view, fixed for the run: the content image (the colour-
+    transferred original render) and its features, covered cells, depth groups, AFCM frequency level,
+    and the prior link to the view visited before it (None for the first)."""
+
+    camera: Camera
+    content_image: torch.Tensor
+    content_features: torch.Tensor
+    mask: torch.Tensor
+    groups: torch.Tensor | None
+    frequency: torch.Tensor
+    link: PriorLink | None = None
+
+
+@dataclass
+class StyliseStats:
+    """Counts for the report."""
+
+    stylise_steps: int = 0
+    correct_steps: int = 0
+    skipped_steps: int = 0
+    densified: list[dict] = field(default_factory=list)
+
+
+def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:
+    """The GT² visiting order of the views; sets each visited view's prior link to its predecessor."""
+    order = view_order([t.camera for t in targets])
+    for previous, current in itertools.pairwise(order):
+        t, p = targets[current], targets[previous]
+        t.link = prior_link(t.camera, depths[current], alphas[current], p.camera, depths[previous], alphas[previous],
+                            tuple(t.mask.shape), tuple(p.mask.shape))
+    return order
+
+
+def frequency_levels(images: list[torch.Tensor], masks: list[torch.Tensor]) -> list[torch.Tensor]:
+    """AFCM's I_f of every view (normalised together)."""
+    energies = [high_frequency_energy(image, tuple(mask.shape)) for image, mask in zip(images, masks)]
+    return normalise_frequency(energies, masks)
+
+
+class Styliser:
+    """Runs the schedule of one transfer on ``scene`` (the colour-transferred working scene)."""
+
+    def __init__(self, scene: GaussianScene, views: list[ViewTargets], order: list[int], bank: TextureBank,
+                 extractor: FeatureExtractor, config: TransferConfig, background: torch.Tensor,
+                 frozen: torch.Tensor | None = None) -> None:
+        self.views, self.order, self.bank, self.extractor, self.config = views, order, bank, extractor, config
+        self.background = background
+        self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
+        self.opt = GaussianAdam(scene, self._lrs(), trainable=("sh_dc",), frozen=frozen,
+                                attachments={COLOR_ATTACHMENT: scene.base_colors.detach()})
+        self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
+        self.stats = DensityStats(len(scene), "color", device=scene.device)
+        self.max_gaussians = int(len(scene) * config.densify_max_growth)
+        self.angle_maps: dict[int, torch.Tensor] = {}
+        self.cursor = 0
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.report = StyliseStats()
+
+    def _lrs(self) -> dict[str, float]:
+        lrs = LearningRates().at(0, 1, self.extent)
+        lrs["sh_dc"] = self.config.lr
+        return lrs
+
+    @property
+    def scene(self) -> GaussianScene:
+        return self.opt.scene
+
+    # -- schedule ---------------------------------------------------------------------------------
+    def phases(self) -> list[tuple[str, int, bool]]:
+        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct) when the GPB is on."""
+        cfg = self.config
+        rounds = max(1, cfg.rounds if cfg.gpb else 1)
+        out = []
+        for r in range(rounds):
+            stylise = cfg.stylise_steps * (r + 1) // rounds - cfg.stylise_steps * r // rounds
+            out.append(("stylise", stylise, cfg.densify and r < math.ceil(rounds / 2)))
+            if cfg.gpb:
+                out.append(("correct", cfg.correct_steps * (r + 1) // rounds - cfg.correct_steps * r // rounds, False))
+        return [p for p in out if p[1] > 0]
+
+    # -- stylise ----------------------------------------------------------------------------------
+    def stylise_step(self, densify: bool) -> tuple[float, torch.Tensor]:
+        """One GT² step on the next view in order; (texture loss, the rendered image)."""
+        cfg = self.config
+        v = self.order[self.cursor]
+        view = self.views[v]
+        self.opt.set_trainable(("sh_dc",))
+        out = render(self.scene, [view.camera], background=self.background, backend=cfg.backend, render_depth=False)
+        image = out.colors[0]
+        feats = self.extractor(image.permute(2, 0, 1)[None])
+        distances, weights = self._texture_terms(feats[0], v, view)
+        counted = view.mask
+        style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
+        loss = cfg.lambda_style * style + cfg.lambda_content * content_loss(feats, view.content_features) \
+            + cfg.lambda_tv * tv_loss(image[None])
+        loss.backward()
+        if densify and out.projection is not None:
+            self.stats.add(out.projection, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
+        self._step(loss)
+        self.cursor = (self.cursor + 1) % len(self.order)
+        self.report.stylise_steps += 1
+        if densify and self.report.stylise_steps % cfg.densify_every == 0 and len(self.scene) < self.max_gaussians:
+            done = densify_and_prune(self.opt, self.stats, self.densify_config, self.extent, prune_large=False,
+                                     generator=self.generator)
+            self.report.densified.append({"step": self.report.stylise_steps, "cloned": done.cloned,
+                                          "split": done.split, "pruned": done.pruned, "total": done.total})
+        return float(style.detach()), image.detach()
+
+    def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
+        cfg = self.config
+        prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
+        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0, view.groups)
+        self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
+        c = feats.shape[0]
+        targets = self.bank.features[match.indices.reshape(-1)].to(feats)
+        distances = cosine_distance(feats.reshape(c, -1).T, targets).reshape(view.mask.shape)
+        if not cfg.afcm:
+            return distances, torch.ones_like(distances)
+        phi = distortion(match) if cfg.gt2 else torch.zeros_like(distances)
+        level = depth_level(view.groups, cfg.n_scales, distances)
+        weights = afcm_weight(level, view.frequency.to(distances), phi.to(distances),
+                              AFCMWeights(cfg.lambda_depth, cfg.lambda_frequency, cfg.lambda_distortion))
+        return distances, weights.detach()
+
+    def _prior(self, v: int, view: ViewTargets) -> torch.Tensor:
+        """Prior angle per cell: the start angle in the first view, else carried from the view before."""
+        if view.link is None:
+            angle = torch.full(view.mask.shape, float(self.config.angle) % 360.0)
+            return torch.where(view.mask, angle, torch.full_like(angle, math.nan))
+        previous = self.order[self.order.index(v) - 1]
+        if previous not in self.angle_maps:
+            return torch.full(view.mask.shape, math.nan)
+        return view.link.prior_angles(self.angle_maps[previous])
+
+    # -- correct (Geometry Preservation Branch) ---------------------------------------------------
+    def correct_step(self) -> float:
+        """One reconstruction step of the geometry against a random content image, rendered with c^g."""
+        cfg = self.config
+        self.opt.set_trainable(GEOMETRY)
+        v = int(torch.randint(len(self.views), (1,), generator=self.generator))
+        view = self.views[v]
+        colors = self.opt.attachments[COLOR_ATTACHMENT]
+        out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
+                     render_depth=False)
+        loss = reconstruction_loss(out.colors[0], view.content_image) + \
+            cfg.lambda_scale * scale_regulariser(self.scene.log_scales, cfg.scale_ratio_limit)
+        loss.backward()
+        self._step(loss)
+        self.report.correct_steps += 1
+        return float(loss.detach())
+
+    def _step(self, loss: torch.Tensor) -> None:
+        if not self.opt.step(loss):
+            self.report.skipped_steps += 1
+        self.opt.zero_grad()
