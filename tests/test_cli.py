@@ -253,3 +253,38 @@ def test_transfer_command_bad_texture_is_one_line(capsys, small_ply, tmp_path):
     assert code == 2
     assert_one_line_error(err, str(bad))
     assert not (tmp_path / "o.ply").exists()
+
+
+def stripe_png(folder: Path) -> Path:
+    """A generated 128 px diagonal stripe texture written as PNG."""
+    y, x = np.mgrid[0:128, 0:128]
+    image = ((((x + y) // 8) % 2) * 200 + 30).astype(np.uint8)
+    path = folder / "stripes.png"
+    cv2.imwrite(str(path), np.stack([image, image // 2, 255 - image], axis=-1))
+    return path
+
+
+def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
+    """--region keeps the other Gaussians bit-identical (they come first); the switches reach the report."""
+    region = tmp_path / "region.npy"
+    np.save(region, np.arange(0, 1200, 4))
+    out = tmp_path / "out.ply"
+    code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
+                       *DEMO_FAST, "--region", str(region), "--angle", "30", "--no-gt2", "--no-afcm", "--no-gpb",
+                       "--no-densify", "--report", str(tmp_path / "r.json"))
+    assert code == 0, err
+    before, after = read_ply(small_ply), read_ply(out)
+    outside = np.setdiff1d(np.arange(1200), np.arange(0, 1200, 4))
+    assert torch.equal(after.means[:len(outside)], before.means[outside])
+    assert torch.equal(after.sh_dc[:len(outside)], before.sh_dc[outside])
+    config = json.loads((tmp_path / "r.json").read_text())["config"]
+    assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify"))
+
+
+def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):
+    region = tmp_path / "region.npy"
+    np.save(region, np.zeros((3, 3), dtype=np.float32))
+    code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o",
+                       str(tmp_path / "o.ply"), *DEMO_FAST, "--region", str(region))
+    assert code == 2
+    assert_one_line_error(err, str(region))

@@ -212,6 +212,8 @@ def _add_transfer(commands: Any, debug: argparse.ArgumentParser) -> None:
     transfer_cmd.add_view_arguments(p)
     transfer_cmd.add_transfer_arguments(p)
     p.add_argument("--strip", type=Path, metavar="PNG", help="also write a before/after picture")
+    p.add_argument("--region", type=Path, metavar="MASK.npy",
+                   help="restyle only these Gaussians (.npy of indices or booleans); the rest stay bit-identical")
     p.set_defaults(run=transfer_cmd.cmd_transfer)
 
 

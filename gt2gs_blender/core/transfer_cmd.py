@@ -17,6 +17,7 @@ import torch
 from .atomic import atomic_write
 from .cameras import Camera, auto_views, load_llff, load_views
 from .config import PRESETS, TransferConfig, preset
+from .errors import InputFileError
 from .ply import read_ply, write_ply
 from .rasterizer import render
 from .scene import GaussianScene
@@ -40,6 +41,16 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip the colour transfer before and after stylisation")
     p.add_argument("--no-depth-groups", dest="depth_groups", action="store_false", default=None,
                    help="match every feature against all texture scales, not its depth group's")
+    p.add_argument("--angle", type=float, metavar="DEG",
+                   help="orientation control: the texture's angle in the first view, degrees counter-clockwise")
+    p.add_argument("--no-gt2", dest="gt2", action="store_false", default=None,
+                   help="plain NNFM texture loss instead of the GT² loss with prior views")
+    p.add_argument("--no-afcm", dest="afcm", action="store_false", default=None,
+                   help="no adaptive fine-grained control (every feature cell weighs the same)")
+    p.add_argument("--no-gpb", dest="gpb", action="store_false", default=None,
+                   help="no geometry preservation branch (geometry never learns)")
+    p.add_argument("--no-densify", dest="densify", action="store_false", default=None,
+                   help="no densification while stylising")
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
 
 
@@ -58,7 +69,8 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
         args.preset, stylise_steps=args.steps, resolution=args.resolution, seed=args.seed,
         weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
-        device=args.device, n_views=getattr(args, "views", None), **extra,
+        device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
+        gpb=args.gpb, densify=args.densify, **extra,
     )
 
 
@@ -80,7 +92,8 @@ def cmd_transfer(args: argparse.Namespace) -> None:
     """Re-texture a scene, write the stylised PLY (and report, strip), print a summary."""
     scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
     texture = load_texture(args.texture)  # inputs are checked before any work starts
-    result = run_with_progress(scene, texture, _views(args), config_from_args(args))
+    region = load_region(args.region, len(scene)) if args.region is not None else None
+    result = run_with_progress(scene, texture, _views(args), config_from_args(args), region)
     write_ply(args.output, result.scene)
     print(f"stylised scene: {args.output}")
     _write_outputs(args.report, args.strip, scene, result, texture)
@@ -97,12 +110,27 @@ def _write_outputs(report: Path | None, strip: Path | None, original: GaussianSc
         print(f"before/after: {strip}")
 
 
+def load_region(path: Path, n: int) -> np.ndarray:
+    """A region file: a .npy of Gaussian indices, or of n booleans (True = restyle)."""
+    try:
+        region = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputFileError(path, f"cannot read the region as a .npy array: {exc}") from exc
+    if region.dtype == np.bool_:
+        if region.shape != (n,):
+            raise InputFileError(path, f"a boolean region needs {n} entries (one per Gaussian), has {region.shape}")
+    elif not np.issubdtype(region.dtype, np.integer) or region.ndim != 1:
+        raise InputFileError(path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} "
+                                   f"{region.shape}")
+    return region
+
+
 def run_with_progress(scene: GaussianScene, texture: np.ndarray, views: Sequence[Camera] | None,
-                      config: TransferConfig) -> TransferResult:
+                      config: TransferConfig, region: np.ndarray | None = None) -> TransferResult:
     """``transfer`` with a progress bar on stderr (a redrawn bar on a terminal, else a line per stage)."""
     bar = ProgressBar(sys.stderr)
     try:
-        return transfer(scene, texture, views, config, progress=bar)
+        return transfer(scene, texture, views, config, region=region, progress=bar)
     finally:
         bar.close()
 
