@@ -8,6 +8,7 @@ file of a job lives in one temporary folder, removed by ``cleanup()`` once the p
 """
 from __future__ import annotations
 
+import atexit
 import collections
 import json
 import os
@@ -18,7 +19,8 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass, field
+import weakref
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -51,7 +53,6 @@ class JobStatus:
     output: str | None = None
     report: dict[str, Any] | None = None
     error: str | None = None
-    events: int = field(default=0, repr=False)
 
     @property
     def finished(self) -> bool:
@@ -73,6 +74,7 @@ class Job:
         self._stderr: collections.deque[str] = collections.deque(maxlen=STDERR_LINES)
         self._readers: list[threading.Thread] = []
         self._cancel_requested = False
+        _LIVE.add(self)
 
     def path(self, name: str) -> Path:
         """A file of this job (inside its folder)."""
@@ -136,7 +138,6 @@ class Job:
 
     def _apply(self, event: dict[str, Any]) -> None:
         status = self.status
-        status.events += 1
         kind = event.get("event")
         if kind == "progress":
             status.fraction = float(event.get("fraction") or 0.0)
@@ -210,3 +211,14 @@ class Job:
         for stream in (self.process.stdout, self.process.stderr) if self.process is not None else ():
             stream.close()
         shutil.rmtree(self.folder, ignore_errors=True)
+        _LIVE.discard(self)
+
+
+_LIVE: "weakref.WeakSet[Job]" = weakref.WeakSet()
+
+
+@atexit.register
+def _cleanup_live_jobs() -> None:
+    """When Blender quits during a run: stop the worker and remove its folder."""
+    for job in list(_LIVE):
+        job.cleanup()

@@ -37,7 +37,7 @@ def eta_text(seconds: float | None) -> str:
     """``ETA 1:05`` (empty while unknown)."""
     if seconds is None:
         return ""
-    seconds = max(0, int(round(seconds)))
+    seconds = max(0, round(seconds))
     return f"ETA {seconds // 60}:{seconds % 60:02d}"
 
 
@@ -57,9 +57,10 @@ def report_rows(report: dict[str, Any] | None, result: str | None) -> list[tuple
     """(label, value) rows summarising a run's report."""
     if not report:
         return [("Result", result)] if result else []
-    rows = [("Result", result or "-"), ("Time", f"{report['seconds']:.1f} s"),
-            ("Splats", f"{report['n_gaussians']:,}"),
-            ("Views", f"{report['n_views']} at {report['image_size'][0]}×{report['image_size'][1]}"),
+    width, height = report.get("image_size") or ("?", "?")
+    rows = [("Result", result or "-"), ("Time", f"{report.get('seconds', 0.0):.1f} s"),
+            ("Splats", f"{report.get('n_gaussians', 0):,}"),
+            ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
             ("Device", str(report.get("device", "?")))]
     weights = report.get("weights") or {}
     rows.append(("Features", ("FALLBACK: " if weights.get("fallback") else "") + str(weights.get("spec", "?"))))
