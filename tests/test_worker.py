@@ -1,7 +1,6 @@
 """The worker process and its Blender-side handle (bpy-free): events, outputs, cancel, crash, bad input."""
 from __future__ import annotations
 
-import inspect
 import json
 import os
 import signal
@@ -16,7 +15,6 @@ import pytest
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
 from gt2gs_blender.core import deps
 from gt2gs_blender.core.ply import read_ply_arrays, write_ply
-from gt2gs_blender.core.transfer import transfer
 from gt2gs_blender.core.worker import EXIT_INPUT, JobSpec, write_png
 
 from .test_transfer import blob_scene, stripes
@@ -105,14 +103,23 @@ def test_bad_input_is_one_readable_line(job, tmp_path):
     assert "missing.png" in status.error and "Traceback" not in status.error
 
 
-def test_region_mask_is_checked_and_passed_only_when_supported(job, tmp_path):
-    np.save(job.path("region.npy"), np.arange(0, 600, 2))
+def test_region_restyles_only_the_masked_gaussians(job, tmp_path):
+    selected = np.arange(0, 600, 2)
+    np.save(job.path("region.npy"), selected)
     job.start({**transfer_spec(tmp_path), "region": "region.npy"})
     status = wait_for(job, lambda s: s.finished)
-    if "region" in inspect.signature(transfer).parameters:
-        assert status.state == DONE, status.error
-    else:
-        assert status.state == ERROR and "region" in status.error
+    assert status.state == DONE, status.error
+    original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
+    kept = np.setdiff1d(np.arange(600), selected)
+    assert np.array_equal(result.sh_dc[:len(kept)], original.sh_dc[kept])  # the others, bit-identical, first
+    assert colours_differ(result.sh_dc[len(kept):], original.sh_dc[selected])
+
+
+def test_region_out_of_range_is_an_input_error(job, tmp_path):
+    np.save(job.path("region.npy"), np.array([0, 600]))
+    job.start({**transfer_spec(tmp_path), "region": "region.npy"})
+    status = wait_for(job, lambda s: s.finished)
+    assert status.state == ERROR and job.process.returncode == EXIT_INPUT and "region" in status.error
 
 
 def test_preview_job_writes_a_png(job, tmp_path):

@@ -18,7 +18,6 @@ on success, so a cancelled or failed run leaves no result behind.
 """
 from __future__ import annotations
 
-import inspect
 import json
 import os
 import signal
@@ -125,8 +124,8 @@ def write_png(path: Path, rgb: np.ndarray) -> None:
     atomic_write(path, data.tobytes())
 
 
-def load_region(path: Path, n: int) -> np.ndarray:
-    """Sorted unique Gaussian indices from a .npy file, checked against the scene size ``n``."""
+def load_region(path: Path) -> np.ndarray:
+    """Gaussian indices from a .npy file (the transfer checks them against the scene)."""
     try:
         indices = np.load(path, allow_pickle=False)
     except (OSError, ValueError) as exc:
@@ -134,11 +133,7 @@ def load_region(path: Path, n: int) -> np.ndarray:
     if indices.ndim != 1 or indices.dtype.kind not in "iu":
         raise InputFileError(path, f"the region mask must be a 1-D array of integer indices, got {indices.dtype} "
                                    f"{indices.shape}")
-    if indices.size == 0:
-        raise InputFileError(path, "the region mask selects no Gaussian")
-    if indices.min() < 0 or indices.max() >= n:
-        raise InputFileError(path, f"the region mask has indices outside 0..{n - 1}")
-    return np.unique(indices.astype(np.int64))
+    return indices.astype(np.int64)
 
 
 def _texture(spec: JobSpec) -> np.ndarray | str:
@@ -182,12 +177,7 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
     scene = read_ply(spec.input)
     config = _config(spec)
     views = _views(spec)
-    extra: dict[str, Any] = {}
-    if spec.region is not None:
-        if "region" not in inspect.signature(transfer).parameters:
-            raise GT2GSError("restyling only selected points needs an engine with region support "
-                             "(transfer(..., region=...)); this version has none")
-        extra["region"] = load_region(spec.region, len(scene))
+    region = None if spec.region is None else load_region(spec.region)
     if spec.preview_dir is not None:
         spec.preview_dir.mkdir(parents=True, exist_ok=True)
     frames = 0
@@ -202,7 +192,7 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
         events("progress", stage=p.stage, step=p.step, total=p.total, fraction=p.fraction, eta_s=p.eta_s,
                message=p.message, preview=None if frame is None else str(frame))
 
-    result = transfer(scene, _texture(spec), views, config, progress=progress, cancel=cancel, **extra)
+    result = transfer(scene, _texture(spec), views, config, region=region, progress=progress, cancel=cancel)
     write_ply(spec.output, result.scene)
     if spec.report is not None:
         atomic_write(spec.report, json.dumps(result.report, indent=1, default=str))

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import glob
-import inspect
 import os
 import signal
 import sys
@@ -21,7 +20,6 @@ from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, Job
 from gt2gs_blender.core import deps  # noqa: E402
 from gt2gs_blender.core.cameras import load_cameras_json  # noqa: E402
 from gt2gs_blender.core.ply import write_ply  # noqa: E402
-from gt2gs_blender.core.transfer import transfer  # noqa: E402
 from gt2gs_blender.core.worker import write_png  # noqa: E402
 from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view  # noqa: E402
 
@@ -183,12 +181,11 @@ def test_region_uses_the_point_selection(blob):
     assert np.array_equal(transfer_run.selected_points(blob), np.flatnonzero(mask))
     run = transfer_run.TransferRun.start(bpy.context, {})
     assert np.array_equal(np.load(run.job.path("region.npy")), np.flatnonzero(mask))
-    status = tick_until(run, lambda s: s.finished)
-    if "region" in inspect.signature(transfer).parameters:
-        assert status.state == DONE
-    else:  # the engine's region support lands separately: until then the run says so
-        assert status.state == ERROR and "region" in status.error
+    assert tick_until(run, lambda s: s.finished).state == DONE
     run.finish()
+    result = bpy.data.objects[run.result_name]
+    kept = np.flatnonzero(~mask)
+    assert np.array_equal(dc(result)[:len(kept)], dc(blob)[kept])  # unselected splats untouched
 
 
 def test_preview_orientation_operator_fills_the_preview(blob):
