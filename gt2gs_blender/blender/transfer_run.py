@@ -69,6 +69,9 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles")):
         if getattr(settings, prop) > 0:
             config[key] = getattr(settings, prop)
+    for key in ("gt2", "afcm", "gpb", "densify"):  # switched off by the user; on means as the preset does
+        if not getattr(settings, key):
+            config[key] = False
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
 
 

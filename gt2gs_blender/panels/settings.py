@@ -67,6 +67,14 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                                  description="Match the scene's colours to the texture's before and after")
     depth_groups: BoolProperty(name="Depth Groups", default=True,
                                description="Show the texture larger on near surfaces than on far ones")
+    gt2: BoolProperty(name="GT² Loss", default=True,
+                      description="Carry the texture's orientation from view to view (off: plain NNFM matching)")
+    afcm: BoolProperty(name="Adaptive Control", default=True,
+                       description="Weight the texture loss by depth, detail and distortion (AFCM)")
+    gpb: BoolProperty(name="Geometry Preservation", default=True,
+                      description="Alternate stylisation with phases that keep the geometry (off: faster)")
+    densify: BoolProperty(name="Densify", default=True,
+                          description="Add splats where the texture needs detail (off: the splat count stays)")
     device: EnumProperty(
         name="Device", default="DEFAULT",
         items=(("DEFAULT", "Default", "The device chosen in the preferences"),

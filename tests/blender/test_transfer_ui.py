@@ -239,6 +239,20 @@ def test_scene_cameras_become_views_in_object_space(fresh):
     assert np.allclose(uv[1], (160 + camera.fx / 5, 120 - camera.fy * 0.5 / 5))  # right and up on screen
 
 
+def test_panel_settings_and_keywords_become_the_job_config(fresh):
+    settings = fresh.context.scene.gt2gs
+    preset, config = transfer_run.config_overrides(fresh.context, {})
+    assert preset == "fast" and config["device"] == "auto" and config["angle"] == 0.0
+    assert not {"stylise_steps", "resolution", "n_angles", "gt2", "gpb", "weights_path"} & set(config)
+    settings.steps, settings.gpb, settings.device, settings.angle = 12, False, "CPU", 15.0
+    preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
+    assert preset == "preview" and config["angle"] == -30.0 and config["stylise_steps"] == 12
+    assert config["gpb"] is False and config["device"] == "cpu"
+    from gt2gs_blender.core.config import preset as make_preset
+
+    assert make_preset(preset, **config).gpb is False  # every key is a TransferConfig field
+
+
 def test_transfer_view_in_each_state():
     idle = transfer_view(None, None, None)
     assert (idle.state, idle.can_transfer, idle.can_cancel, idle.progress) == (IDLE, False, False, None)
