@@ -101,8 +101,13 @@ class GT2GS_OT_transfer_texture(RunOverrides, bpy.types.Operator):
         run = _start(self, context, "transfer")
         if run is None:
             return {"CANCELLED"}
-        while not run.tick(context).finished:
-            time.sleep(HEADLESS_TICK_S)
+        try:
+            while not run.tick(context).finished:
+                time.sleep(HEADLESS_TICK_S)
+        except BaseException:  # Ctrl+C or a bug: stop the worker and remove its files before passing it on
+            run.cancel()
+            run.finish()
+            raise
         return _end(self, run)
 
     def invoke(self, context, event):
