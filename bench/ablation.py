@@ -1,0 +1,124 @@
+"""The paper's ablation on our scenes: full GT²-GS vs no GT² loss (NNFM) vs no AFCM vs no GPB, same budget.
+
+``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N]`` prints a table of SSIM,
+short/long-range RMSE and LPIPS, texture match, time and Gaussian count, writes
+bench/out/ablation.json and a PNG strip per scene (texture, original, then each variant, 3 views).
+The donut uses 16 automatic orbit views; the fern is the shared LLFF capture fitted with the fit
+engine (``bench/fit_fern.py`` output, fitted here first when missing) seen from its own cameras.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gt2gs_blender.core.cameras import Camera, load_views  # noqa: E402
+from gt2gs_blender.core.config import preset  # noqa: E402
+from gt2gs_blender.core.fit import FitConfig, fit_llff  # noqa: E402
+from gt2gs_blender.core.ply import read_ply  # noqa: E402
+from gt2gs_blender.core.rasterizer import render  # noqa: E402
+from gt2gs_blender.core.scene import GaussianScene  # noqa: E402
+from gt2gs_blender.core.texture import load_texture  # noqa: E402
+from gt2gs_blender.core.transfer import fit_cameras, transfer  # noqa: E402
+
+SHARED = ROOT.parent / "shared"
+OUT = ROOT / "bench" / "out"
+VARIANTS = {
+    "full": {},
+    "no-GT2": {"gt2": False},
+    "no-AFCM": {"afcm": False},
+    "no-GPB": {"gpb": False},
+}
+SCENES = {
+    "donut": ("herringbone_wood.jpg", (1.0, 1.0, 1.0)),
+    "fern": ("tree_bark.jpg", (0.0, 0.0, 0.0)),
+}
+STRIP_VIEWS = 3
+TILE = 192
+METRICS = ("ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match")
+
+
+def load_scene(name: str, fit_iterations: int) -> tuple[GaussianScene, list[Camera] | None]:
+    """The scene and its views (None = automatic views)."""
+    if name == "donut":
+        return read_ply(SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"), None
+    fitted = OUT / "fit_fern"
+    if not (fitted / "point_cloud.ply").is_file():
+        print(f"fitting the fern first ({fit_iterations} steps) into {fitted}", flush=True)
+        fit_llff(SHARED / "data" / "scenes" / "fern_llff", fitted, config=FitConfig(iterations=fit_iterations))
+    return read_ply(fitted / "point_cloud.ply"), load_views(fitted / "cameras.json")
+
+
+def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] | None, overrides: dict,
+                args: argparse.Namespace, background: tuple[float, float, float]) -> tuple[dict, GaussianScene]:
+    config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"),
+                    background=background, **overrides)
+    start = time.perf_counter()
+    result = transfer(scene, texture, views, config)
+    row = {k: result.report["metrics"][k] for k in METRICS}
+    row.update(texture_match_start=result.report["metrics"]["texture_match_start"],
+               seconds=time.perf_counter() - start, n_gaussians=result.report["n_gaussians"])
+    return row, result.scene
+
+
+def strip(texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[Camera],
+          background: tuple[float, float, float]) -> np.ndarray:
+    """One row per scene (original, then the variants), one column per view, each row labelled on
+    the left; the first label tile shows the texture. uint8 RGB."""
+    rows = []
+    for i, (name, scene) in enumerate(scenes.items()):
+        label = cv2.resize(texture, (TILE, TILE), interpolation=cv2.INTER_AREA) if i == 0 \
+            else np.ones((TILE, TILE, 3), np.float32)
+        cv2.putText(label, name, (8, TILE - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0.0, 0.0, 0.0), 2, cv2.LINE_AA)
+        tiles = [label] + [
+            cv2.resize(render(scene, [cam], background=torch.tensor(background)).colors[0].clamp(0, 1).numpy(),
+                       (TILE, TILE), interpolation=cv2.INTER_AREA) for cam in cameras]
+        rows.append(np.concatenate(tiles, axis=1))
+    return (np.concatenate(rows, axis=0) * 255 + 0.5).astype(np.uint8)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", nargs="+", choices=tuple(SCENES), default=list(SCENES))
+    parser.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
+    parser.add_argument("--preset", default="fast")
+    parser.add_argument("--steps", type=int, help="stylise steps (default: the preset's)")
+    parser.add_argument("--fit-iterations", type=int, default=1500, help="fern fit steps when it must be fitted")
+    parser.add_argument("--json", type=Path, default=OUT / "ablation.json")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    records = []
+    print(f"{'scene':<6} {'variant':<8} " + " ".join(f"{m:>13}" for m in METRICS) + f" {'s':>6} {'N':>7}")
+    for scene_name in args.scenes:
+        texture_name, background = SCENES[scene_name]
+        scene, views = load_scene(scene_name, args.fit_iterations)
+        texture = load_texture(SHARED / "data" / "textures" / texture_name)
+        results = {"original": scene}
+        for variant in args.variants:
+            row, results[variant] = run_variant(scene, texture, views, VARIANTS[variant], args, background)
+            row.update(scene=scene_name, variant=variant, texture=texture_name, preset=args.preset,
+                       load=os.getloadavg())
+            records.append(row)
+            cells = " ".join(f"{row[m]:>13.4f}" if row[m] is not None else f"{'-':>13}" for m in METRICS)
+            print(f"{scene_name:<6} {variant:<8} {cells} {row['seconds']:>6.0f} {row['n_gaussians']:>7,}", flush=True)
+        cameras = fit_cameras(scene, views, 256, 16)
+        picks = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(STRIP_VIEWS)]
+        png = OUT / f"ablation_{scene_name}.png"
+        cv2.imwrite(str(png), cv2.cvtColor(strip(texture, results, picks, background), cv2.COLOR_RGB2BGR))
+        print(f"strip: {png}")
+    args.json.write_text(json.dumps(records, indent=1))
+    print(f"records: {args.json}")
+
+
+if __name__ == "__main__":
+    main()
