@@ -361,7 +361,11 @@ def _bytes_before_vertex(path: PathLike, f: BinaryIO, header: PlyHeader, byte_or
 
 
 def _walk_list_element(path: PathLike, data: bytes, element: PlyElement, byte_order: str) -> int:
-    """Byte size of an element with list properties at the start of ``data`` (row by row)."""
+    """Byte size of an element with list properties at the start of ``data`` (row by row).
+
+    Every row reads at least one list count byte or stops with an error, so a corrupt row count
+    (up to 2^32 - 1) costs at most one step per byte of the file, never a hang.
+    """
     pos = 0
     for _ in range(element.count):
         for prop in element.properties:
@@ -372,15 +376,13 @@ def _walk_list_element(path: PathLike, data: bytes, element: PlyElement, byte_or
             code = SCALAR_TYPES[prop.list_count_type]
             count_size = np.dtype(code).itemsize
             if pos + count_size > len(data):
-                break
+                raise PlyFormatError(path, f"truncated: the data of element {element.name!r} ends early")
             (length,) = struct.unpack_from(byte_order + _STRUCT_CHAR[code], data, pos)
             if length < 0:
                 raise PlyFormatError(path, f"element {element.name!r}: negative list length {length}")
             pos += count_size + length * item
         if pos > len(data):
-            break
-    if pos > len(data):
-        raise PlyFormatError(path, f"truncated: the data of element {element.name!r} ends early")
+            raise PlyFormatError(path, f"truncated: the data of element {element.name!r} ends early")
     return pos
 
 
