@@ -12,6 +12,7 @@ import json
 import math
 import os
 import struct
+import tokenize
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,9 @@ from .errors import CameraFileError
 from .scene import GaussianScene
 
 _ORTHO_TOL = 1e-4
+MAX_IMAGE_SIDE = 65536
+"""Largest image width or height a camera may have (Blender's limit): larger sizes in a camera file
+are corruption, and rendering them would try to allocate terabytes."""
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
@@ -62,6 +66,8 @@ class Camera:
             raise ValueError(f"camera focal lengths must be positive, got fx={self.fx}, fy={self.fy}")
         for key in ("width", "height"):
             object.__setattr__(self, key, _positive_int(getattr(self, key), f"camera {key}"))
+        if max(self.width, self.height) > MAX_IMAGE_SIDE:
+            raise ValueError(f"camera image size {self.width} x {self.height} exceeds {MAX_IMAGE_SIDE} px per side")
         object.__setattr__(self, "name", str(self.name))
 
     @classmethod
@@ -205,6 +211,8 @@ def load_cameras_json(path: str | os.PathLike) -> list[Camera]:
             data = json.load(f)
     except (OSError, ValueError) as exc:
         raise CameraFileError(path, f"cannot read cameras.json: {exc}") from exc
+    except RecursionError:
+        raise CameraFileError(path, "cannot read cameras.json: its JSON is nested too deeply") from None
     if not isinstance(data, list) or not data:
         raise CameraFileError(path, "expected a non-empty JSON list of camera entries")
     return [_camera_from_json(path, i, entry) for i, entry in enumerate(data)]
@@ -236,9 +244,23 @@ def _camera_from_json(path: str | os.PathLike, index: int, entry: Any) -> Camera
 def _json_number(path: str | os.PathLike, where: str, entry: dict, key: str) -> float:
     """A finite JSON number (not a bool or string) from ``entry[key]``."""
     value = entry[key]
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise CameraFileError(path, f"{where}: {key} must be a finite number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(_as_float(value)):
+        raise CameraFileError(path, f"{where}: {key} must be a finite number, got {_short(value)}")
     return value
+
+
+def _as_float(value: int | float) -> float:
+    """``value`` as a float; integers beyond the float range (JSON allows them) become Inf."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
+def _short(value: Any, limit: int = 60) -> str:
+    """repr of a JSON value, cut to ``limit`` characters for a one-line message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
 
 
 def _json_array(path: str | os.PathLike, where: str, entry: dict, key: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -248,8 +270,10 @@ def _json_array(path: str | os.PathLike, where: str, entry: dict, key: str, shap
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
         arr = None
+    except OverflowError:  # an integer beyond the float range
+        arr = None
     if arr is None or arr.shape != shape or _has_bool(value):
-        raise CameraFileError(path, f"{where}: {key} must be numbers of shape {shape}, got {value!r}")
+        raise CameraFileError(path, f"{where}: {key} must be numbers of shape {shape}, got {_short(value)}")
     if not np.all(np.isfinite(arr)):
         raise CameraFileError(path, f"{where}: {key} contains non-finite values")
     return arr
@@ -323,15 +347,31 @@ def load_llff(path: str | os.PathLike, *, downscale: float = 1.0, image_dir: str
 
 
 def _read_poses_bounds(npy: Path) -> np.ndarray:
-    """The N x 17 float64 table of a poses_bounds.npy, validated."""
+    """The N x 17 float64 table of a poses_bounds.npy, validated.
+
+    The header is checked before the data is loaded, so a corrupt header cannot make numpy allocate
+    the (possibly terabytes of) data it promises; numpy's header parser raises several exception
+    types on garbage (ValueError, EOFError, SyntaxError, tokenize.TokenError), all reported alike.
+    """
     try:
+        with open(npy, "rb") as f:
+            version = np.lib.format.read_magic(f)
+            if version not in ((1, 0), (2, 0)):
+                raise ValueError(f"unsupported .npy format version {version}")
+            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) \
+                else np.lib.format.read_array_header_2_0
+            shape, _, dtype = read_header(f)
+            data_bytes = os.fstat(f.fileno()).st_size - f.tell()
+        if len(shape) != 2 or shape[0] == 0 or shape[1] != 17:
+            raise ValueError(f"expected an N x 17 array (3x5 pose + near, far), got shape {shape}")
+        if dtype.kind not in "iuf":
+            raise ValueError(f"expected real numbers, got dtype {dtype}")
+        if shape[0] * shape[1] * dtype.itemsize > data_bytes:
+            raise ValueError(f"truncated: the header promises a {shape[0]} x 17 array but only {data_bytes} "
+                             "bytes of data follow")
         table = np.load(npy, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError) as exc:
         raise CameraFileError(npy, f"cannot read poses_bounds.npy: {exc}") from exc
-    if table.ndim != 2 or table.shape[0] == 0 or table.shape[1] != 17:
-        raise CameraFileError(npy, f"expected an N x 17 array (3x5 pose + near, far), got shape {table.shape}")
-    if not np.issubdtype(table.dtype, np.number):
-        raise CameraFileError(npy, f"expected numbers, got dtype {table.dtype}")
     table = table.astype(np.float64)
     if not np.all(np.isfinite(table)):
         raise CameraFileError(npy, "contains non-finite values")
