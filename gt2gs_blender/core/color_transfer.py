@@ -107,12 +107,22 @@ def apply_to_scene(
 
 
 def _weighted_moments(pairs: Iterable[tuple[ImageLike, ImageLike | None]]) -> tuple[torch.Tensor, torch.Tensor]:
-    """Weighted mean (3,) and covariance (3,3) in float64, accumulated image by image."""
+    """Weighted mean (3,) and covariance (3,3) in float64, accumulated image by image.
+
+    Pixels are shifted by the first pixel before accumulating (the shifted-data algorithm): the
+    covariance of a constant image is then exactly 0 instead of rounding noise of E[x^2] - E[x]^2,
+    whose square root (~1e-7) the whitening would amplify into a visible colour change.
+    """
     total = torch.zeros((), dtype=torch.float64)
     first = torch.zeros(3, dtype=torch.float64)
     second = torch.zeros(3, 3, dtype=torch.float64)
+    shift: torch.Tensor | None = None
     for image, weight in pairs:
         x = torch.as_tensor(image).detach().reshape(-1, 3).to("cpu", torch.float64)
+        if shift is None and len(x):
+            shift = x[0].clone()
+        if shift is not None:
+            x = x - shift
         w = torch.ones(len(x), dtype=torch.float64) if weight is None else (
             torch.as_tensor(weight).detach().reshape(-1).to("cpu", torch.float64))
         if len(w) != len(x):
@@ -124,7 +134,7 @@ def _weighted_moments(pairs: Iterable[tuple[ImageLike, ImageLike | None]]) -> tu
         raise ValueError("colour transfer needs at least one pixel with positive weight")
     mean = first / total
     cov = second / total - torch.outer(mean, mean)
-    return mean, 0.5 * (cov + cov.T)
+    return mean + (0.0 if shift is None else shift), 0.5 * (cov + cov.T)
 
 
 def _largest_eig(cov: torch.Tensor) -> float:
