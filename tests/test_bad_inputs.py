@@ -20,7 +20,8 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from gt2gs_blender.core import atomic, cli
 from gt2gs_blender.core.cameras import MAX_IMAGE_SIDE, Camera, load_cameras_json, load_views

@@ -249,7 +249,7 @@ def _json_number(path: str | os.PathLike, where: str, entry: dict, key: str) -> 
     return value
 
 
-def _as_float(value: int | float) -> float:
+def _as_float(value: float) -> float:
     """``value`` as a float; integers beyond the float range (JSON allows them) become Inf."""
     try:
         return float(value)
