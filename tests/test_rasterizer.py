@@ -168,6 +168,33 @@ def test_float32_gradients_match_float64(backend):
         assert (g32 - g64).norm() <= 1e-3 * g64.norm()
 
 
+@pytest.mark.parametrize("loop_max", [0, 1000])
+def test_torch_backend_small_chunks_match_reference(monkeypatch, loop_max):
+    """Chunks of 2 entries (hundreds of pixels stopping at T < 1e-4 inside and across chunks), scanned
+    with slice loops or with torch.cumprod/cumsum: reference images, and the default chunking's gradients."""
+    from gt2gs_blender.core.rasterizer import torch_backend
+
+    gaussians = random_gaussians(300, 3, seed=6, spread=0.5)
+    viewmats, ks = two_cameras()
+    weights = torch.rand(2, 47, 61, 3, generator=torch.Generator().manual_seed(1))
+
+    def grads():
+        inputs = [t.clone().requires_grad_(True) for t in gaussians]
+        out = rasterization(*inputs, viewmats, ks, 61, 47, sh_degree=3, backend="torch")
+        ((out.colors * weights).sum() + out.depths.sum() + out.alphas.sum()).backward()
+        return [t.grad for t in inputs]
+
+    expected = grads()
+    monkeypatch.setattr(torch_backend, "CHUNK_MIN", 2)
+    monkeypatch.setattr(torch_backend, "CHUNK_ELEMENTS", 1)
+    monkeypatch.setattr(torch_backend, "LOOP_MAX", loop_max)
+    assert torch_backend.chunk_size(1) == 2
+    out = compare_to_reference(gaussians, viewmats, ks, 61, 47, "torch", 3)
+    assert out.alphas.max() > 0.9998  # pixels really stop
+    for got, want in zip(grads(), expected):
+        assert (got - want).norm() <= 1e-5 * want.norm()
+
+
 def test_backends_agree_with_each_other():
     if len(BACKENDS) < 2:
         pytest.skip(f"only {BACKENDS} available here")

@@ -118,21 +118,22 @@ def project(
         gaussians_ok = (opacities >= ALPHA_MIN) & torch.isfinite(scales).all(-1) & torch.isfinite(quats).all(-1)
     pairs = _visible_pairs(p_cam_all.detach(), ks, gaussians_ok, near_plane, far_plane)
     cam_ids, gauss_ids = pairs[:, 0], pairs[:, 1]
-    p_cam = p_cam_all[cam_ids, gauss_ids]
-    k = ks[cam_ids]
+    p_cam = p_cam_all.reshape(-1, 3).index_select(0, cam_ids * means.shape[0] + gauss_ids)
+    k = ks.index_select(0, cam_ids)
     # The covariance chain runs in float64: det = ac - b^2 cancels catastrophically in float32 for
     # needle-like Gaussians (1000:1 scales), and the extra cost is a few small matrix products. It
     # runs on the visible entries only, so Gaussians culled for non-finite values never enter it.
     f64 = torch.float64
-    jac = _jacobians(p_cam.to(f64), k.to(f64), width, height) @ rot[cam_ids].to(f64)
-    cov2d = jac @ _covariances_3d(quats[gauss_ids].to(f64), scales[gauss_ids].to(f64)) @ jac.transpose(1, 2)
+    jac = _jacobians(p_cam.to(f64), k.to(f64), width, height) @ rot.to(f64).index_select(0, cam_ids)
+    cov3d = _covariances_3d(quats.index_select(0, gauss_ids).to(f64), scales.index_select(0, gauss_ids).to(f64))
+    cov2d = jac @ cov3d @ jac.transpose(1, 2)
     a = cov2d[:, 0, 0] + EPS2D
     b = cov2d[:, 0, 1]
     c = cov2d[:, 1, 1] + EPS2D
     det = a * c - b * b
     z = p_cam[:, 2]
     means2d = torch.stack([k[:, 0, 0] * p_cam[:, 0] / z + k[:, 0, 2], k[:, 1, 1] * p_cam[:, 1] / z + k[:, 1, 2]], -1)
-    op = opacities[gauss_ids]
+    op = opacities.index_select(0, gauss_ids)
     with torch.no_grad():
         r2 = 2.0 * torch.log(255.0 * op.clamp_min(ALPHA_MIN))
         radii = (torch.sqrt(r2[:, None] * torch.stack([a, c], -1)) * (1.0 + 1e-4) + 1e-3).to(means.dtype)
@@ -140,14 +141,15 @@ def project(
         keep = (det > 0) & torch.isfinite(det) & (rects[:, 0] <= rects[:, 2]) & (rects[:, 1] <= rects[:, 3])
         keep &= torch.isfinite(means2d).all(-1)
         idx = keep.nonzero().squeeze(1)
-    inv_det = 1.0 / det[idx]
-    conics = torch.stack([c[idx] * inv_det, -b[idx] * inv_det, a[idx] * inv_det], -1).to(means.dtype)
-    cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam[idx]
+    # index_select rather than [idx]: its backward is an index_add, not a slower accumulating index_put
+    cab = torch.stack([c, -b, a], -1).index_select(0, idx)
+    conics = (cab / det.index_select(0, idx)[:, None]).to(means.dtype)
+    cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam.index_select(0, idx)
     rgb = _entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
     return Projection(
-        cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d[idx], conics=conics, depths=p_cam[:, 2],
-        opacities=op[idx], colors=with_depth_channel(rgb, p_cam[:, 2], with_depth), tile_bbox=rects[idx].contiguous(),
-        radii=radii[idx],
+        cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d.index_select(0, idx), conics=conics,
+        depths=p_cam[:, 2], opacities=op.index_select(0, idx), colors=with_depth_channel(rgb, p_cam[:, 2], with_depth),
+        tile_bbox=rects[idx].contiguous(), radii=radii[idx],
     )
 
 
@@ -162,11 +164,11 @@ def _entry_colors(
 ) -> torch.Tensor:
     """Per-entry colours: given directly (N, D) or evaluated from SH (N, K, 3) for each view direction."""
     if sh_degree is None:
-        return colors[gauss_ids]
+        return colors.index_select(0, gauss_ids)
     if sh_degree == 0:
-        return sh0_to_rgb(colors[:, 0])[gauss_ids]
+        return sh0_to_rgb(colors[:, 0]).index_select(0, gauss_ids)
     rot, trans = viewmats[:, :3, :3], viewmats[:, :3, 3]
     centers = -torch.einsum("bji,bj->bi", rot, trans)
-    dirs = means[gauss_ids] - centers[cam_ids]
+    dirs = means.index_select(0, gauss_ids) - centers.index_select(0, cam_ids)
     dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    return eval_sh(colors[gauss_ids], dirs, sh_degree)
+    return eval_sh(colors[:, :(sh_degree + 1) ** 2].index_select(0, gauss_ids), dirs, sh_degree)
