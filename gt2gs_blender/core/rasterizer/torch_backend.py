@@ -76,9 +76,10 @@ def _just_below(value: float, dtype: torch.dtype) -> float:
     return torch.nextafter(v, torch.zeros_like(v)).item()
 
 
-def _per_slot(values: torch.Tensor, pairs: torch.Tensor) -> torch.Tensor:
-    """(C, P) columns of per-entry ``values`` (M, C) for every list slot, detached (rows contiguous)."""
-    return values.detach().t().contiguous().index_select(1, pairs)
+def _per_slot(values: torch.Tensor, pairs: torch.Tensor) -> list[torch.Tensor]:
+    """Each column of per-entry ``values`` (M, C) for every list slot, detached: C tensors (P,).
+    Gathering columns one by one is ~4x faster than a (P, C) or (C, P) gather for random entries."""
+    return [column.index_select(0, pairs) for column in values.detach().t().contiguous()]
 
 
 def _min_over_tile(
@@ -110,7 +111,8 @@ def _lists(means2d, conics, colors, opacities, bins: TileBins, tiles_x: int, til
     local = bins.pair_tile.long() % (tiles_x * tiles_y)
     row = torch.div(local, tiles_x, rounding_mode="floor")
     centre = torch.stack([local - row * tiles_x, row]).to(f64) * TILE + TILE / 2
-    xi, eta = _per_slot(means2d.to(f64), pairs) - centre
+    mx, my = _per_slot(means2d.to(f64), pairs)
+    xi, eta = mx - centre[0], my - centre[1]
     a, b, c = _per_slot(conics.to(f64), pairs)
     log_o = torch.log(opacities.detach().to(f64)).index_select(0, pairs)
     # q <= 2 log(255 o) <=> alpha >= 1/255; the margin keeps every slot float rounding could light
