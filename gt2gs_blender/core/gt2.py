@@ -151,31 +151,62 @@ class Match:
     free_angles: torch.Tensor
 
 
+def angle_layout(theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Rows grouped by angle, for matching one angle at a time: the distinct angles (A,) ascending
+    and an (A, L) table of row positions (-1 pads) in row order within each angle."""
+    angles, inverse, counts = torch.unique(theta, return_inverse=True, return_counts=True)
+    order = torch.sort(inverse, stable=True).indices
+    starts = torch.cumsum(counts, 0) - counts
+    slot = torch.arange(len(theta), device=theta.device) - starts[inverse[order]]
+    table = torch.full((len(angles), int(counts.max()) if len(counts) else 0), -1, dtype=torch.long,
+                       device=theta.device)
+    table[inverse[order], slot] = order
+    return angles, table
+
+
 @torch.no_grad()
 def match_with_prior(feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor, lambda_prior: float,
-                     groups: torch.Tensor | None = None) -> Match:
+                     groups: torch.Tensor | None = None, cells: torch.Tensor | None = None) -> Match:
     """Per cell of ``feats`` (C,h,w): argmin over the bank (restricted to the cell's depth group when
     ``groups`` (h,w) is given and >= 0) of (1 - cos) + ``lambda_prior`` * angle_distance(prior, theta)
-    per degree; NaN ``prior`` cells match on cosine alone."""
+    per degree; NaN ``prior`` cells match on cosine alone. ``cells`` (h,w) bool: match only these
+    (the texture loss counts only covered cells); the others get row 0 as a placeholder.
+
+    The prior term is the same for every row of one angle, so each cell takes its nearest row per
+    angle first and adds the penalty to those A minima only (A = angles, not the M rows): the same
+    targets as costing every row, at about the price of the cosine products alone."""
     c, h, w = feats.shape
     queries = F.normalize(feats.reshape(c, -1).T, dim=1, eps=COSINE_EPS)
     rows = F.normalize(bank.features.to(queries), dim=1, eps=COSINE_EPS)
-    theta = bank.theta.to(queries)
     flat_prior = prior.reshape(-1).to(queries)
     flat_groups = None if groups is None else groups.reshape(-1).to(queries.device)
-    best = torch.empty(h * w, dtype=torch.long, device=queries.device)
-    free = torch.empty_like(best)
-    for g in ([None] if flat_groups is None else torch.unique(flat_groups).tolist()):
-        cells = torch.arange(h * w, device=queries.device) if g is None else (flat_groups == g).nonzero().squeeze(1)
+    wanted = torch.ones(h * w, dtype=torch.bool, device=queries.device) if cells is None \
+        else cells.reshape(-1).to(queries.device)
+    best = torch.zeros(h * w, dtype=torch.long, device=queries.device)
+    free = torch.zeros_like(best)
+    for g in ([None] if flat_groups is None else torch.unique(flat_groups[wanted]).tolist()):
+        members = wanted if g is None else wanted & (flat_groups == g)
+        cells_g = members.nonzero().squeeze(1)
         bank_rows = torch.arange(len(rows), device=queries.device) if g is None or g < 0 \
             else (bank.k.to(queries.device) == g).nonzero().squeeze(1)
-        step = max(1, MATCH_BLOCK // max(len(bank_rows), 1))
-        for start in range(0, len(cells), step):
-            part = cells[start:start + step]
-            cost = 1.0 - queries[part] @ rows[bank_rows].T
-            free[part] = bank_rows[cost.argmin(dim=1)]
-            penalty = lambda_prior * angle_distance(flat_prior[part, None], theta[None, bank_rows])
-            best[part] = bank_rows[(cost + torch.nan_to_num(penalty, nan=0.0)).argmin(dim=1)]
+        group_rows = rows[bank_rows]
+        angles, table = angle_layout(bank.theta.to(queries.device)[bank_rows])
+        blocks = table.numel() == len(bank_rows) and bool(
+            torch.equal(table.reshape(-1), torch.arange(len(bank_rows), device=table.device)))
+        step = max(1, MATCH_BLOCK // max(table.numel(), 1))
+        for start in range(0, len(cells_g), step):
+            part = cells_g[start:start + step]
+            cost = 1.0 - queries[part] @ group_rows.T
+            if blocks:  # rows already ordered by angle in equal runs (every bank built here): a view
+                per_angle = cost.view(len(part), *table.shape)
+            else:
+                per_angle = torch.where(table >= 0, cost[:, table.clamp_min(0)], torch.inf)
+            nearest, slot = per_angle.min(dim=2)
+            free_angle = nearest.argmin(dim=1)
+            penalty = lambda_prior * angle_distance(flat_prior[part, None], angles[None].to(queries))
+            best_angle = (nearest + torch.nan_to_num(penalty, nan=0.0)).argmin(dim=1)
+            free[part] = bank_rows[table[free_angle, slot.gather(1, free_angle[:, None]).squeeze(1)]]
+            best[part] = bank_rows[table[best_angle, slot.gather(1, best_angle[:, None]).squeeze(1)]]
     return Match(best.reshape(h, w), bank.theta[best].reshape(h, w), bank.theta[free].reshape(h, w))
 
 

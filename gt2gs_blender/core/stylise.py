@@ -156,7 +156,8 @@ class Styliser:
         """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
         cfg = self.config
         prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
-        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0, view.groups)
+        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0, view.groups,
+                                 view.mask)
         self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
         c = feats.shape[0]
         targets = self.bank.features[match.indices.reshape(-1)].to(feats)
