@@ -37,6 +37,8 @@ class TransferConfig:
     densify_every: int = 25          # stylise steps between densification events
     densify_grad_threshold: float = 2e-4  # mean |dL/d f_dc| that makes a Gaussian grow
     densify_max_growth: float = 1.5  # no densification once the scene has grown by this factor
+    skip_hidden: bool = True         # freeze Gaussians no view sees (left out of rendering and optimisation)
+    hidden_threshold: float = 0.1    # ... when their blending weight summed over all pixels of all views is below this
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     features: str = "auto"           # feature network preference (see features.load_feature_extractor)
     weights_path: str | None = None  # explicit weights file or folder
@@ -56,6 +58,8 @@ class TransferConfig:
         if self.stylise_steps < 0 or self.correct_steps < 0 or self.lr <= 0:
             raise ValueError(f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
                              f"{self.correct_steps}, {self.lr}")
+        if self.hidden_threshold < 0:
+            raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         if self.device not in ("auto", "cpu", "cuda"):
             raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
 

@@ -272,9 +272,16 @@ def transfer(
                           config.n_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     content = render_views(original, cameras, background, config.backend)
-    work = original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
+    start = work = original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
+    hidden = hidden_gaussians(original, cameras, config.hidden_threshold, config.backend) \
+        if config.skip_hidden else None
+    if hidden is not None and selected is not None and not bool((selected & ~hidden).any()):
+        hidden = None  # the whole region is hidden: restyle it as asked
+    if hidden is not None:
+        work = work.subset(~hidden)
+    region = selected if selected is None or hidden is None else selected[~hidden]
     if config.color_transfer:
-        work = apply_color_transfer(work, content, image, selected, config.backend)
+        work = apply_color_transfer(work, content, image, region, config.backend)
     extractor = load_feature_extractor(config.features, config.weights_path, device)
     targets = view_targets(content, work, extractor, config, config.backend)
     tracker.end()
@@ -284,7 +291,7 @@ def transfer(
     tracker.end()
 
     tracker.begin("stylise")
-    frozen = None if selected is None else ~selected
+    frozen = None if region is None else ~region
     work, frozen, stats = stylise(work, content, targets, bank, extractor, config, tracker, frozen)
     tracker.end()
 
@@ -293,15 +300,69 @@ def transfer(
     if config.color_transfer:
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
-    if frozen is not None:
-        work = concat([work.subset(frozen), work.subset(~frozen)])
+    work = _assemble(work, restyled, start, selected, hidden, _structure_changed(stats))
     metrics = _evaluate(work, content, targets, bank, extractor, config) if config.evaluate else None
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
                          "region": None if selected is None else int(selected.sum())}
+    report["skips"] = {"hidden": None if hidden is None else int(hidden.sum())}
     tracker.tell(1, 1, "done")
     return TransferResult(scene=work.to("cpu"), report=report)
+
+
+HIDDEN_CAMERAS_PER_CALL = 4
+"""Cameras rendered together when measuring each Gaussian's contribution."""
+
+
+def contributions(scene: GaussianScene, cameras: Sequence[Camera], backend: str = "auto") -> torch.Tensor:
+    """Per Gaussian (N,), its blending weight T*alpha summed over every pixel of every camera, in
+    pixels: the gradient of the summed render of a zero colour probe, so exactly what compositing
+    gives it (0 for a Gaussian culled, too faint or behind opaque ones everywhere)."""
+    probe = torch.zeros(len(scene), 1, dtype=scene.dtype, device=scene.device, requires_grad=True)
+    geometry = scene.detach()
+    start = 0
+    while start < len(cameras):
+        size = (cameras[start].width, cameras[start].height)
+        end = start + 1
+        while end < len(cameras) and end - start < HIDDEN_CAMERAS_PER_CALL \
+                and (cameras[end].width, cameras[end].height) == size:
+            end += 1
+        out = render(geometry, cameras[start:end], colors=probe, render_depth=False, backend=backend)
+        out.colors.sum().backward()
+        start = end
+    return probe.grad[:, 0].detach() if probe.grad is not None else torch.zeros(len(scene), device=scene.device)
+
+
+def hidden_gaussians(scene: GaussianScene, cameras: Sequence[Camera], threshold: float,
+                     backend: str = "auto") -> torch.Tensor | None:
+    """Bool (N,): the Gaussians whose summed contribution to the views is at most ``threshold``
+    pixels (no view can show a change of theirs), or None when there are none (nothing to skip)."""
+    hidden = contributions(scene, cameras, backend) <= threshold
+    return hidden if bool(hidden.any()) and not bool(hidden.all()) else None
+
+
+def _structure_changed(stats: StyliseStats) -> bool:
+    """Whether densification added or removed any Gaussian during the run."""
+    return any(d["cloned"] or d["split"] or d["pruned"] for d in stats.densified)
+
+
+def _assemble(work: GaussianScene, restyled: torch.Tensor | None, start: GaussianScene,
+              selected: torch.Tensor | None, hidden: torch.Tensor | None, changed: bool) -> GaussianScene:
+    """The result from the optimised ``work`` scene and ``start`` (every input Gaussian as the run
+    began: at the result's SH degree, before colour transfer), whose hidden rows come back as they are.
+    Without a region: the original order when the hidden rows can go back to their places (no
+    densification), else the hidden rows first. With a region: the Gaussians outside it first, in
+    their original order, then the region's hidden ones, then the restyled ones (and any densified)."""
+    if hidden is None and selected is None:
+        return work
+    if selected is None:
+        if changed:
+            return concat([start.subset(hidden), work])
+        rows = (~hidden).nonzero().squeeze(1)
+        return replace(start, **{k: v.index_copy(0, rows, work.tensors()[k]) for k, v in start.tensors().items()})
+    parts = [start.subset(~selected)] + ([] if hidden is None else [start.subset(selected & hidden)])
+    return concat(parts + [work.subset(restyled)])
 
 
 def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.device) -> torch.Tensor | None:

@@ -1,0 +1,169 @@
+"""One texture transfer, timed: a scene x texture x preset -> seconds per stage, peak MiB, quality.
+
+``python bench/transfer.py [--preset fast] [--set key=value ...] [--profile] [--warm-bank]`` runs the
+shared donut with the herringbone-wood photo by default, prints a table and writes
+bench/out/transfer_<preset>.json. The texture bank is built into a fresh cache unless
+``--warm-bank`` (so the time is end to end: weights, bank, colour transfer, stylisation, GPB,
+metrics). ``--profile`` runs under cProfile and splits the time into render forward/backward, VGG
+forward, the other backward (VGG and losses), matching, the optimiser and the correct phases. Timings
+on a shared machine are noisy: the load average is printed and stored beside them.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import json
+import os
+import pstats
+import sys
+import tempfile
+import time
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from gt2gs_blender.core.config import TransferConfig, preset  # noqa: E402
+from gt2gs_blender.core.metrics import peak_memory_mib  # noqa: E402
+from gt2gs_blender.core.ply import read_ply  # noqa: E402
+from gt2gs_blender.core.transfer import transfer  # noqa: E402
+
+SHARED = ROOT.parent / "shared"
+OUT = ROOT / "bench" / "out"
+DEFAULT_SCENE = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
+DEFAULT_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
+METRICS = ("texture_match", "texture_match_start", "ssim", "st_rmse", "lt_rmse", "st_lpips", "lt_lpips")
+PROFILE_PARTS: dict[str, tuple[tuple[str, str], ...]] = {
+    "stylise phases": (("stylise.py", "stylise_step"),),
+    "  render fwd (stylise)": (),
+    "  VGG fwd": (("features.py", "forward"),),
+    "  matching (GT2 targets)": (("gt2.py", "match_with_prior"),),
+    "  backward, all": (("_tensor.py", "backward"),),
+    "    rasterizer backward": (("cpu_backend.py", "backward"), ("torch_backend.py", "backward")),
+    "  optimiser step": (("optim.py", "step"),),
+    "correct phases (GPB)": (("stylise.py", "correct_step"),),
+    "densification": (("densify.py", "densify_and_prune"),),
+    "render fwd, all": (("rasterizer/__init__.py", "render"),),
+    "content renders + targets": (("transfer.py", "view_targets"),),
+    "prior links": (("stylise.py", "order_and_link"),),
+    "bank build": (("transfer.py", "build_bank"),),
+    "metrics (finish)": (("transfer.py", "_evaluate"),),
+}
+"""Profile rows: the summed cumulative time of the listed (file suffix, function) pairs; a call
+nested in another listed one of the same row is not counted twice (cProfile's cumulative time)."""
+
+
+def parse_overrides(pairs: list[str]) -> dict[str, Any]:
+    """``key=value`` strings typed by the TransferConfig field they name."""
+    types = {f.name: f.type for f in fields(TransferConfig)}
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, _, text = pair.partition("=")
+        if key not in types:
+            raise SystemExit(f"unknown setting {key!r}")
+        kind = str(types[key])
+        if kind.startswith("bool"):
+            out[key] = text.lower() in ("1", "true", "yes", "on")
+        elif kind.startswith("int"):
+            out[key] = int(text)
+        elif kind.startswith("float"):
+            out[key] = float(text)
+        else:
+            out[key] = None if text == "None" else text
+    return out
+
+
+def profile_rows(stats: pstats.Stats) -> dict[str, float]:
+    """Seconds per :data:`PROFILE_PARTS` row from a cProfile run."""
+    table: dict[tuple[str, str], tuple[float, float]] = {}
+    for (filename, _, name), (_, _, tottime, cumtime, _) in stats.stats.items():  # type: ignore[attr-defined]
+        key = (filename.replace(os.sep, "/"), name)
+        total, _ = table.get(key, (0.0, 0.0))
+        table[key] = (total + cumtime, tottime)
+    rows = {}
+    for label, wanted in PROFILE_PARTS.items():
+        rows[label] = sum(cum for (path, name), (cum, _) in table.items()
+                          if any(path.endswith(suffix) and name == fn for suffix, fn in wanted))
+    rows["  render fwd (stylise)"] = _render_in(stats, "stylise_step")
+    return rows
+
+
+def _render_in(stats: pstats.Stats, caller: str) -> float:
+    """Cumulative seconds of the rasterizer's ``render`` when called from ``caller``."""
+    for (filename, _, name), (_, _, _, _, callers) in stats.stats.items():  # type: ignore[attr-defined]
+        if filename.replace(os.sep, "/").endswith("rasterizer/__init__.py") and name == "render":
+            return sum(v[3] for (_, _, fn), v in callers.items() if fn == caller)
+    return 0.0
+
+
+def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | None) -> dict[str, Any]:
+    """One transfer; the record stored in the JSON."""
+    config = preset(args.preset, weights_path=str(args.weights), **overrides)
+    if cache_dir is not None:
+        config = config.with_overrides(cache_dir=cache_dir)
+    scene = read_ply(args.scene)
+    load_before = os.getloadavg()
+    profiler = cProfile.Profile() if args.profile else None
+    start = time.perf_counter()
+    if profiler is not None:
+        profiler.enable()
+    result = transfer(scene, str(args.texture), args.views, config)
+    if profiler is not None:
+        profiler.disable()
+    seconds = time.perf_counter() - start
+    report = result.report
+    record = {
+        "scene": str(args.scene), "texture": str(args.texture), "preset": args.preset, "overrides": overrides,
+        "seconds": seconds, "stage_seconds": report["stage_seconds"], "peak": peak_memory_mib(report["device"]),
+        "n_gaussians_start": len(scene), "n_gaussians": report["n_gaussians"], "n_views": report["n_views"],
+        "image_size": report["image_size"], "bank": report["bank"], "metrics": report["metrics"],
+        "skips": report.get("skips"), "stylise": {k: v for k, v in report["stylise"].items() if k != "densified"},
+        "load_before": load_before, "load_after": os.getloadavg(), "cpu_count": os.cpu_count(),
+    }
+    if profiler is not None:
+        record["profile"] = profile_rows(pstats.Stats(profiler))
+    return record
+
+
+def print_record(record: dict[str, Any]) -> None:
+    """The table: stages, total, memory, metrics, and the profile when there is one."""
+    print(f"{Path(record['scene']).parent.name} x {Path(record['texture']).stem} x {record['preset']} "
+          f"{record['overrides'] or ''}  ({record['n_views']} views, {record['image_size'][0]} px, "
+          f"{record['n_gaussians_start']:,} -> {record['n_gaussians']:,} Gaussians)")
+    for stage, s in record["stage_seconds"].items():
+        print(f"  {stage:<28} {s:>8.1f} s")
+    print(f"  {'total':<28} {record['seconds']:>8.1f} s   peak RSS {record['peak']['rss_peak_mib']:.0f} MiB   "
+          f"load {record['load_before'][0]:.1f} -> {record['load_after'][0]:.1f} on {record['cpu_count']} cores")
+    metrics = record["metrics"] or {}
+    print("  " + "  ".join(f"{m} {metrics[m]:.4f}" for m in METRICS if metrics.get(m) is not None))
+    for label, s in record.get("profile", {}).items():
+        print(f"  {label:<28} {s:>8.1f} s  {100 * s / record['seconds']:>5.1f} %")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scene", type=Path, default=DEFAULT_SCENE)
+    parser.add_argument("--texture", type=Path, default=DEFAULT_TEXTURE)
+    parser.add_argument("--preset", default="fast")
+    parser.add_argument("--views", type=int, help="automatic views (default: the preset's)")
+    parser.add_argument("--weights", type=Path, default=SHARED / "weights")
+    parser.add_argument("--set", dest="overrides", nargs="*", default=[], metavar="KEY=VALUE",
+                        help="TransferConfig settings over the preset")
+    parser.add_argument("--profile", action="store_true", help="split the time by component (cProfile)")
+    parser.add_argument("--warm-bank", action="store_true", help="use the user's bank cache (not end to end)")
+    parser.add_argument("--json", type=Path, help="default bench/out/transfer_<preset>.json")
+    args = parser.parse_args()
+    OUT.mkdir(parents=True, exist_ok=True)
+    overrides = parse_overrides(args.overrides)
+    with tempfile.TemporaryDirectory() as fresh:
+        record = run(args, overrides, None if args.warm_bank else fresh)
+    print_record(record)
+    path = args.json or OUT / f"transfer_{args.preset}.json"
+    path.write_text(json.dumps(record, indent=1))
+    print(f"record: {path}")
+
+
+if __name__ == "__main__":
+    main()
