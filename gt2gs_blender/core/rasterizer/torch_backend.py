@@ -91,8 +91,12 @@ def _min_over_tile(
     x_lo, x_hi, y_lo, y_hi = xi - h, xi + h, eta - h, eta + h
     best = torch.where((x_lo <= 0) & (x_hi >= 0) & (y_lo <= 0) & (y_hi >= 0), 0.0, math.inf)
     b2 = 2.0 * b
-    edges = [(x, (-b / c * x).clamp_(y_lo, y_hi)) for x in (x_lo, x_hi)]   # best y on each vertical edge
-    edges += [((-b / a * y).clamp_(x_lo, x_hi), y) for y in (y_lo, y_hi)]
+    # best y on each vertical edge and x on each horizontal one; a degenerate conic (a or c = 0, so
+    # b = 0: a footprint infinitely long along an axis) is flat along that edge: any point will do
+    slope_y = torch.where(c > 0, -b / torch.where(c > 0, c, 1.0), 0.0)
+    slope_x = torch.where(a > 0, -b / torch.where(a > 0, a, 1.0), 0.0)
+    edges = [(x, (slope_y * x).clamp_(y_lo, y_hi)) for x in (x_lo, x_hi)]
+    edges += [((slope_x * y).clamp_(x_lo, x_hi), y) for y in (y_lo, y_hi)]
     for x, y in edges:
         best = torch.minimum(best, (a * x + b2 * y) * x + c * y * y)
     return best
