@@ -78,12 +78,4 @@ class GT2GS_OT_install_dependencies(bpy.types.Operator):
 
 classes = (GT2GS_OT_install_dependencies,)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -57,12 +57,4 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
 
 classes = (GT2GS_AP_preferences,)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

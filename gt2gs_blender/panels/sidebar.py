@@ -55,12 +55,4 @@ class VIEW3D_PT_gt2gs_splat(bpy.types.Panel):
 
 classes = (VIEW3D_PT_gt2gs_splat,)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)

@@ -166,12 +166,4 @@ class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
 
 classes = (VIEW3D_PT_gt2gs_transfer, VIEW3D_PT_gt2gs_advanced)
 
-
-def register() -> None:
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
