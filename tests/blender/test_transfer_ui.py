@@ -147,6 +147,19 @@ def test_cancel_mid_run_leaves_the_scene_and_no_files(blob):
     assert transfer_view(blob.name, None, outcome).message == "Cancelled; the scene is unchanged"
 
 
+def test_a_second_transfer_while_one_runs_is_refused(blob):
+    bpy.context.scene.gt2gs.steps = 400
+    before = snapshot()
+    run = transfer_run.TransferRun.start(bpy.context, {})
+    tick_until(run, lambda s: s.stage is not None)
+    with pytest.raises(transfer_run.RunError, match="already running; cancel it first"):
+        transfer_run.TransferRun.start(bpy.context, {})
+    run.cancel()
+    run.tick(bpy.context)
+    run.finish()
+    assert same(snapshot(), before) and not run.job.folder.exists() and not transfer_run.ACTIVE
+
+
 def test_killed_worker_is_a_clear_error_and_the_scene_is_unchanged(blob):
     bpy.context.scene.gt2gs.steps = 400
     before = snapshot()
