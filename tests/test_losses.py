@@ -6,13 +6,15 @@ import math
 import pytest
 import torch
 
+from gt2gs_blender.core.gt2 import match_with_prior
 from gt2gs_blender.core.losses import (
     content_loss,
+    cosine_distance,
     nearest_features,
-    nnfm_loss,
     scale_regulariser,
     tv_loss,
 )
+from gt2gs_blender.core.texture_bank import TextureBank
 
 
 def _brute_nnfm(feats: torch.Tensor, bank: torch.Tensor, groups=None, bank_groups=None):
@@ -42,65 +44,44 @@ def data():
 
 
 @pytest.mark.parametrize("chunk_bytes", [64 * 2**20, 4 * 6, 4 * 7 * 13, 1])
-def test_nnfm_equals_brute_force_for_any_chunking(data, chunk_bytes):
+def test_nearest_features_equal_brute_force_for_any_chunking(data, chunk_bytes):
     feats, bank = data
-    result = nnfm_loss(feats, bank, chunk_bytes=chunk_bytes)
-    idx, dist = _brute_nnfm(feats, bank)
-    assert torch.equal(result.indices, idx)
-    torch.testing.assert_close(result.distances.double(), dist, atol=1e-6, rtol=0)
-    assert float(result.loss) == pytest.approx(float(dist.mean()), abs=1e-6)
-
-
-def test_nnfm_gradient_flows_to_features_against_fixed_targets(data):
-    feats, bank = data
-    feats64 = feats.double().requires_grad_()
-    nnfm_loss(feats64, bank.double()).loss.backward()
+    queries = feats.permute(0, 2, 3, 1).reshape(-1, 6)
     idx, _ = _brute_nnfm(feats, bank)
-    ref = feats.double().requires_grad_()
-    q = ref.permute(0, 2, 3, 1).reshape(-1, 6)
-    t = bank.double()[idx.reshape(-1)]
-    (1 - (q * t).sum(1) / (q.norm(dim=1) * t.norm(dim=1))).mean().backward()
-    torch.testing.assert_close(feats64.grad, ref.grad, atol=1e-12, rtol=0)
+    assert torch.equal(nearest_features(queries, bank, chunk_bytes=chunk_bytes), idx.reshape(-1))
 
 
-def test_nnfm_mask_averages_only_counted_cells(data):
-    feats, bank = data
-    mask = torch.zeros(5, 4, dtype=torch.bool)
-    mask[1:3, 2:] = True
-    result = nnfm_loss(feats, bank, mask=mask)
-    _, dist = _brute_nnfm(feats, bank)
-    assert float(result.loss) == pytest.approx(float(dist[:, 1:3, 2:].mean()), abs=1e-6)
-    empty = nnfm_loss(feats.requires_grad_(), bank, mask=torch.zeros(5, 4, dtype=torch.bool))
-    assert float(empty.loss.detach()) == 0.0 and empty.loss.requires_grad
-
-
-def test_nnfm_groups_restrict_matching_to_the_cells_group(data):
+def test_nnfm_targets_of_the_styliser_equal_brute_force_with_groups(data):
+    """The no-prior matching the styliser runs (NNFM, optionally per depth group) against float64."""
     feats, bank = data
     bank_groups = torch.arange(41) % 3
-    groups = torch.randint(-1, 3, (2, 5, 4), generator=torch.Generator().manual_seed(1))
-    result = nnfm_loss(feats, bank, groups=groups, bank_groups=bank_groups, chunk_bytes=4 * 6 * 3)
-    idx, dist = _brute_nnfm(feats, bank, groups, bank_groups)
-    assert torch.equal(result.indices, idx)
-    torch.testing.assert_close(result.distances.double(), dist, atol=1e-6, rtol=0)
-    matched = bank_groups[result.indices]
+    groups = torch.randint(-1, 3, (5, 4), generator=torch.Generator().manual_seed(1))
+    labelled = TextureBank(bank, bank_groups, torch.zeros(41), (1.0, 0.8, 0.6), (0.0,), 1, "test")
+    for grouped in (None, groups):
+        match = match_with_prior(feats[0], labelled, torch.full((5, 4), math.nan), 0.0, groups=grouped)
+        idx, dist = _brute_nnfm(feats[:1], bank, grouped, bank_groups)
+        assert torch.equal(match.indices, idx[0])
+        targets = bank[match.indices.reshape(-1)]
+        distances = cosine_distance(feats[0].reshape(6, -1).T, targets).double()
+        torch.testing.assert_close(distances, dist[0].reshape(-1), atol=1e-6, rtol=0)
+    matched = bank_groups[match.indices]
     assert torch.equal(matched[groups >= 0], groups[groups >= 0])
-    with pytest.raises(ValueError, match="no bank features in group 5"):
-        nnfm_loss(feats, bank, groups=torch.full((5, 4), 5), bank_groups=bank_groups)
-    with pytest.raises(ValueError, match="bank_groups"):
-        nnfm_loss(feats, bank, groups=groups)
 
 
-def test_unbatched_features_and_exact_matches():
+def test_cosine_distance_gradient_by_finite_differences():
+    g = torch.Generator().manual_seed(4)
+    a = torch.randn(7, 5, dtype=torch.float64, generator=g).requires_grad_()
+    b = torch.randn(7, 5, dtype=torch.float64, generator=g)
+    assert torch.autograd.gradcheck(lambda x: cosine_distance(x, b), (a,))
+
+
+def test_exact_matches_and_ties():
     bank = torch.eye(4)
-    feats = torch.zeros(4, 1, 3)
-    feats[2, 0, 0] = 5.0   # exactly bank row 2
-    feats[0, 0, 1] = 0.5   # exactly bank row 0
-    feats[:2, 0, 2] = 1.0  # tie between rows 0 and 1: the first wins
-    result = nnfm_loss(feats, bank)
-    assert result.indices.tolist() == [[2, 0, 0]]
-    assert result.distances[0, :2].abs().max() < 1e-7
-    assert float(result.distances[0, 2]) == pytest.approx(1 - 1 / math.sqrt(2), abs=1e-6)
-    assert nearest_features(torch.tensor([[0.0, 0.0, 0.0, 1.0]]), bank).tolist() == [3]
+    queries = torch.tensor([[0.0, 0.0, 5.0, 0.0], [0.5, 0.0, 0.0, 0.0], [1.0, 1.0, 0.0, 0.0]])
+    assert nearest_features(queries, bank).tolist() == [2, 0, 0]  # a tie: the first row wins
+    distances = cosine_distance(queries, bank[[2, 0, 0]])
+    assert distances[:2].abs().max() < 1e-7
+    assert float(distances[2]) == pytest.approx(1 - 1 / math.sqrt(2), abs=1e-6)
 
 
 def test_tv_of_constant_image_is_zero_even_with_different_channels():

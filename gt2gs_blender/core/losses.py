@@ -1,12 +1,10 @@
-"""The stylisation losses: NNFM (nearest texture-feature matching), content, image TV, scale regulariser.
+"""The stylisation loss pieces: cosine distance and nearest texture features (NNFM, paper Eq. 3), content, image TV, scale regulariser.
 
 Conventions that differ from the authors' code on purpose (DESIGN §5): cosine similarity is taken
 over the CHANNEL axis of feature maps (theirs normalises over height), and TV differences pixels
 along HEIGHT and WIDTH (theirs differences channels and height).
 """
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
@@ -18,87 +16,17 @@ DEFAULT_CHUNK_BYTES = 64 * 2**20
 """Memory bound of one block of the query x bank similarity matrix."""
 
 
-@dataclass
-class NNFMResult:
-    """What ``nnfm_loss`` found. ``distances`` (B,h,w) carry gradients to the rendered features;
-    ``indices`` (B,h,w) are the bank rows matched (look up the bank's k and theta labels with them)."""
-
-    loss: torch.Tensor
-    distances: torch.Tensor
-    indices: torch.Tensor
-
-
-def nnfm_loss(
-    feats: torch.Tensor,
-    bank: torch.Tensor,
-    *,
-    chunk_bytes: int = DEFAULT_CHUNK_BYTES,
-    mask: torch.Tensor | None = None,
-    groups: torch.Tensor | None = None,
-    bank_groups: torch.Tensor | None = None,
-) -> NNFMResult:
-    """Mean cosine distance of each feature cell to its nearest bank feature (ARF's NNFM, paper Eq. 3).
-
-    ``feats`` (C,h,w) or (B,C,h,w); ``bank`` (M,C). The nearest neighbours are found without
-    gradients in memory-bounded blocks, then the distances are recomputed with gradients against the
-    matched (constant) bank rows. ``mask`` (h,w) or (B,h,w) bool: cells counted in the mean (all
-    cells count with the mask None). ``groups`` (h,w) or (B,h,w) int with ``bank_groups`` (M,):
-    each cell matches only bank rows of its own group (depth group -> texture scale); cells with a
-    negative group match the whole bank.
-    """
-    batched = feats if feats.dim() == 4 else feats[None]
-    b, c, h, w = batched.shape
-    queries = batched.permute(0, 2, 3, 1).reshape(-1, c)
-    flat_groups = None if groups is None else groups.expand(b, h, w).reshape(-1)
-    indices = nearest_features(queries, bank, chunk_bytes=chunk_bytes, groups=flat_groups, bank_groups=bank_groups)
-    targets = bank[indices.to(bank.device)].to(queries)
-    distances = cosine_distance(queries, targets).reshape(b, h, w)
-    indices = indices.reshape(b, h, w)
-    if mask is None:
-        loss = distances.mean()
-    else:
-        counted = mask.expand(b, h, w)
-        loss = distances[counted].mean() if counted.any() else distances.sum() * 0.0
-    if feats.dim() == 3:
-        distances, indices = distances[0], indices[0]
-    return NNFMResult(loss=loss, distances=distances, indices=indices)
-
-
 def cosine_distance(a: torch.Tensor, b: torch.Tensor, dim: int = -1) -> torch.Tensor:
     """``1 - cos(a, b)`` along ``dim`` (the channel axis), with a norm floor against zero vectors."""
     return 1.0 - (F.normalize(a, dim=dim, eps=COSINE_EPS) * F.normalize(b, dim=dim, eps=COSINE_EPS)).sum(dim=dim)
 
 
 @torch.no_grad()
-def nearest_features(
-    queries: torch.Tensor,
-    bank: torch.Tensor,
-    *,
-    chunk_bytes: int = DEFAULT_CHUNK_BYTES,
-    groups: torch.Tensor | None = None,
-    bank_groups: torch.Tensor | None = None,
-) -> torch.Tensor:
-    """Index (N,) of the bank row (M,C) most cosine-similar to each query (N,C); first index on ties.
-
-    With ``groups`` (N,) and ``bank_groups`` (M,), a query of group g >= 0 searches only the rows of
-    group g (which must exist); a negative group searches all rows.
-    """
+def nearest_features(queries: torch.Tensor, bank: torch.Tensor, *, chunk_bytes: int = DEFAULT_CHUNK_BYTES) -> torch.Tensor:
+    """Index (N,) of the bank row (M,C) most cosine-similar to each query (N,C); first index on ties."""
     q = F.normalize(queries.detach(), dim=1, eps=COSINE_EPS)
     m = F.normalize(bank.detach().to(q), dim=1, eps=COSINE_EPS)
-    if groups is None:
-        return _blockwise_argmax(q, m, chunk_bytes)
-    if bank_groups is None:
-        raise ValueError("groups given without bank_groups: the bank rows' groups are needed to restrict matching")
-    groups = groups.to(q.device)
-    bank_groups = bank_groups.to(q.device)
-    out = torch.empty(len(q), dtype=torch.long, device=q.device)
-    for g in torch.unique(groups).tolist():
-        rows = torch.arange(len(m), device=q.device) if g < 0 else torch.nonzero(bank_groups == g).squeeze(1)
-        if len(rows) == 0:
-            raise ValueError(f"no bank features in group {g}; the bank has groups {torch.unique(bank_groups).tolist()}")
-        cells = groups == g
-        out[cells] = rows[_blockwise_argmax(q[cells], m[rows], chunk_bytes)]
-    return out
+    return _blockwise_argmax(q, m, chunk_bytes)
 
 
 def _blockwise_argmax(q: torch.Tensor, m: torch.Tensor, chunk_bytes: int) -> torch.Tensor:
