@@ -18,6 +18,7 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras import Camera
+from gt2gs_blender.core.densify import DensifyConfig, DensityStats, densify_and_prune
 from gt2gs_blender.core.fit import FitConfig, Trainer
 from gt2gs_blender.core.optim import BACKOFF_AFTER, PARAM_NAMES, GaussianAdam, StepGuard
 from gt2gs_blender.core.rasterizer import available_backends, render
@@ -305,3 +306,52 @@ def test_a_fit_with_non_finite_losses_never_writes_nan_into_the_scene(caplog):
     for name, t in scene.tensors().items():
         assert bool(torch.isfinite(t).all()), name
     assert not torch.equal(scene.sh_dc, start.sh_dc)  # the finite steps did train
+
+
+# -- densification of absurd scales -----------------------------------------------------------------
+
+FLOAT32_MAX_LOG = math.log(torch.finfo(torch.float32).max)
+ABSURD_LOG_SCALES = {
+    "scale-e80": (80.0, 80.0, 79.0),
+    "scale-e80-needle": (80.0, -80.0, -80.0),
+    "scale-overflows": (100.0, 2.0, 2.0),
+    "log-scale-float32-max": (3.4e38, 0.0, 0.0),
+    "scale-1e-30": (math.log(1e-30),) * 3,
+    "scale-zero": (-1e4, -1e4, -1e4),
+    "log-scale-float32-min": (-3.4e38, -3.4e38, -3.4e38),
+    "ordinary": (-1.0, -1.5, -2.0),
+}
+
+
+@pytest.mark.parametrize("percent_dense", [0.01, 0.0])
+def test_densifying_absurd_scales_keeps_every_value_finite(percent_dense, caplog):
+    """Split children are sampled from their parent: exp(100) overflows, so such a parent stays unsplit
+    (counted, logged, bit-identical); everything else splits or clones into finite values. With
+    percent_dense 0 even the tiny ones are split."""
+    names = sorted(ABSURD_LOG_SCALES)
+    rows = [{"mean": (0.1 * i, -0.05 * i, 2.0), "log_scale": ABSURD_LOG_SCALES[name],
+             "quat": (0.9, 0.3, -0.2, 0.25)} for i, name in enumerate(names)]
+    opt = GaussianAdam(raw_scene(rows), dict.fromkeys(PARAM_NAMES, 1e-3))
+    before = {k: v.detach().clone() for k, v in opt.scene.tensors().items()}
+    stats = DensityStats(len(rows))
+    stats.grad_sum[:], stats.count[:] = 1.0, 1  # every Gaussian is due to grow
+    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.densify"):
+        report = densify_and_prune(opt, stats, DensifyConfig(percent_dense=percent_dense), 1.0, prune_large=False,
+                                   generator=torch.Generator().manual_seed(0))
+    for name, t in opt.scene.tensors().items():
+        assert bool(torch.isfinite(t).all()), name
+    overflowing = [i for i, name in enumerate(names) if max(ABSURD_LOG_SCALES[name]) > FLOAT32_MAX_LOG]
+    small = [i for i, name in enumerate(names)
+             if float(torch.tensor(ABSURD_LOG_SCALES[name]).exp().max()) <= percent_dense]
+    assert report.unsplit == len(overflowing) == 2 and report.pruned == 0
+    assert report.cloned == len(small) and report.split == len(rows) - len(small) - len(overflowing)
+    assert report.total == len(opt.scene) == len(rows) + report.cloned + report.split
+    assert any(f"{len(overflowing)} Gaussians were not split" in r.getMessage() for r in caplog.records)
+    survivors = sorted(overflowing + small)  # first, in their order, exactly as they were
+    after = {k: v.detach() for k, v in opt.scene.tensors().items()}
+    for name, t in after.items():
+        assert torch.equal(t[:len(survivors)], before[name][survivors]), name
+        assert torch.equal(t[len(survivors):len(survivors) + len(small)], before[name][small]), name  # clones
+    parents = torch.tensor([i for i in range(len(rows)) if i not in survivors]).repeat_interleave(2)
+    children = after["log_scales"][len(survivors) + len(small):]
+    assert torch.allclose(children, before["log_scales"][parents] - math.log(1.6))

@@ -4,13 +4,15 @@ Per Gaussian we accumulate a screen-space gradient norm over the views that see 
 sources: ``position`` = |dL/d(2D mean)| in normalised device coordinates, as 3DGS does (so its
 threshold 2e-4 applies unchanged), or ``color`` = |dL/d f_dc|, as the GT2-GS authors densify while
 stylising (only colours learn then). Above the threshold, small Gaussians are cloned and large
-ones split into N children with scales / (0.8 N), sampled from the parent. Prune: nearly
+ones split into N children with scales / (0.8 N), sampled from the parent (a parent whose children
+would not be finite, e.g. of scale exp(100), is kept unsplit and counted instead). Prune: nearly
 transparent ones, and (later in training) ones too large on screen or in the world. Frozen
 Gaussians are never densified, pruned or reset. Every change goes through
 :meth:`GaussianAdam.restructure`, so parameters, Adam moments, masks and statistics stay aligned.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass
 
@@ -21,6 +23,7 @@ from .rasterizer.projection import Projection
 from .scene import quats_to_rotmats
 
 GRAD_SOURCES = ("position", "color")
+log = logging.getLogger(__name__)
 
 
 def _check_source(source: str) -> str:
@@ -56,6 +59,8 @@ class DensifyReport:
     split: int
     pruned: int
     total: int
+    unsplit: int = 0
+    """Gaussians due a split whose children would not be finite (absurd scales or positions): kept as they were."""
 
 
 class DensityStats:
@@ -130,18 +135,27 @@ def densify_and_prune(
     grow = (stats.mean_grad() >= config.grad_threshold) & ~opt.frozen & ~prune
     small = max_scale <= config.percent_dense * extent
     clone_ids = (grow & small).nonzero().squeeze(1)
-    split_ids = (grow & ~small).nonzero().squeeze(1).repeat_interleave(config.split_count)
-    means, log_scales = _split_children(scene.means, scene.quats, scene.log_scales, split_ids, config.split_count,
-                                        generator)
+    split_parents = (grow & ~small).nonzero().squeeze(1)
+    count = config.split_count
+    means, log_scales = _split_children(scene.means, scene.quats, scene.log_scales,
+                                        split_parents.repeat_interleave(count), count, generator)
+    finite = (torch.isfinite(means).all(dim=-1) & torch.isfinite(log_scales).all(dim=-1)).view(-1, count).all(dim=-1)
+    unsplit = int((~finite).sum())
+    if unsplit:
+        log.warning("densify: %d Gaussians were not split because their children's positions or scales would not "
+                    "be finite (absurd scales); they are kept as they are", unsplit)
+        children = finite.repeat_interleave(count)
+        split_parents, means, log_scales = split_parents[finite], means[children], log_scales[children]
     values = {
         "means": torch.cat([scene.means[clone_ids], means]),
         "log_scales": torch.cat([scene.log_scales[clone_ids], log_scales]),
     }
-    keep = ~(prune | (grow & ~small))
-    apply_structure(opt, stats, keep, torch.cat([clone_ids, split_ids]), values)
+    keep = ~prune
+    keep[split_parents] = False
+    apply_structure(opt, stats, keep, torch.cat([clone_ids, split_parents.repeat_interleave(count)]), values)
     stats.reset()
-    return DensifyReport(cloned=len(clone_ids), split=len(split_ids) // config.split_count,
-                         pruned=int(prune.sum()), total=len(opt.scene))
+    return DensifyReport(cloned=len(clone_ids), split=len(split_parents), pruned=int(prune.sum()),
+                         total=len(opt.scene), unsplit=unsplit)
 
 
 def _split_children(
