@@ -14,6 +14,7 @@ import shutil
 import struct
 import warnings
 import zlib
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -24,13 +25,16 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from gt2gs_blender.core import atomic, cli
-from gt2gs_blender.core.cameras import MAX_IMAGE_SIDE, Camera, load_cameras_json, load_views
+from gt2gs_blender.core.cameras import MAX_IMAGE_SIDE, Camera, load_cameras_json, load_views, save_cameras_json
 from gt2gs_blender.core.color_transfer import apply_to_scene, fit_color_transform
 from gt2gs_blender.core.config import TransferConfig
 from gt2gs_blender.core.errors import CameraFileError, InputFileError, PlyFormatError
 from gt2gs_blender.core.ply import read_ply, read_ply_arrays, read_ply_header, write_ply
+from gt2gs_blender.core.rasterizer import render
+from gt2gs_blender.core.scene import GaussianScene
 from gt2gs_blender.core.texture import MAX_SIDE, load_texture
 from gt2gs_blender.core.transfer import transfer
+from gt2gs_blender.core.visibility import require_visible
 
 from .test_cameras import COLMAP_CAMERAS, colmap_images, write_colmap_binary, write_colmap_text
 from .test_ply import MUTATION, core_names, mutate, random_columns, raw_ply
@@ -514,3 +518,73 @@ def test_cli_ply_with_a_huge_face_count_is_a_user_error(tmp_path, capsys):
     code, _, err = cli_run(capsys, "info", str(path))
     assert code == 2 and "truncated" in err and err.count("\n") == 1
 
+
+
+# -- a scene no view sees ---------------------------------------------------------------------------
+
+
+def cameras_at(forward: float, centres: list[tuple[float, float, float]]) -> list[Camera]:
+    """64 px cameras looking along +z (``forward`` 1) or -z (-1), OpenCV axes, at ``centres``."""
+    rot = np.diag([1.0, forward, forward])
+    return [Camera.from_cam_to_world(rot, c, 40.0, 40.0, 32.0, 32.0, 64, 64, name=f"c{i}") for i, c in enumerate(centres)]
+
+
+BLIND_CAMERAS = {  # the torus lies around the origin in the z = 0 plane, radius 1.4
+    "looking-away": cameras_at(-1.0, [(0.3 * i, 0.0, -4.0) for i in range(3)]),
+    "scene-outside-the-images": cameras_at(1.0, [(12.0 + i, 0.0, -4.0) for i in range(3)]),
+}
+
+
+def seen_pixels(scene: GaussianScene, cameras: list[Camera]) -> int:
+    """Pixels the real renderer covers (alpha > 0) in all the cameras: the oracle of 'visible'."""
+    with torch.no_grad():
+        return int((render(scene, cameras, render_depth=False, backend="torch").alphas > 0).sum())
+
+
+@pytest.mark.parametrize("case", sorted(BLIND_CAMERAS))
+@pytest.mark.parametrize("switches", [(), ("--no-color-transfer",)])
+def test_cli_transfer_with_cameras_that_see_nothing_is_one_error_naming_the_files(inputs, tmp_path, capsys, case,
+                                                                                   switches):
+    """Used to be a bare ValueError from the colour transfer, or (without it) a 'successful' no-op."""
+    scene_path, texture_path = inputs
+    cameras = BLIND_CAMERAS[case]
+    assert seen_pixels(read_ply(scene_path), cameras) == 0
+    cams_path = tmp_path / "cameras.json"
+    save_cameras_json(cams_path, cameras)
+    out = tmp_path / "styled.ply"
+    code, _, err = cli_run(capsys, "transfer", str(scene_path), str(texture_path), "-o", str(out), "--cameras",
+                           str(cams_path), "--preset", "preview", "--steps", "1", "--resolution", "32",
+                           "--backend", "torch", "--device", "cpu", *switches)
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    assert err == (f"gt2gs: error: {scene_path}: no Gaussian is visible in any of the 3 views of {cams_path}: "
+                   f"all 288 Gaussians are behind the cameras or outside their images; check that the cameras "
+                   f"belong to this scene (same coordinate frame and scale)\n")
+    assert not out.exists()
+
+
+def test_one_gaussian_seen_by_the_last_camera_is_enough(tmp_path):
+    scene = cli.torus_scene(n_major=24, n_minor=12)
+    one = scene.subset(torch.arange(len(scene)) == 5)
+    corner = cameras_at(1.0, [tuple(float(v) for v in one.means[0] + torch.tensor([0.2, 0.2, -3.0]))])
+    cameras = BLIND_CAMERAS["looking-away"] + corner
+    assert seen_pixels(one, cameras[:-1]) == 0 and 0 < seen_pixels(one, cameras) < 64 * 64 / 4
+    config = TransferConfig(resolution=64, backend="torch", device="cpu")
+    require_visible(one, cameras, config, tmp_path / "one.ply", "cameras.json")
+    with pytest.raises(InputFileError, match="no Gaussian is visible in any of the 3 views of cameras.json"):
+        require_visible(one, cameras[:-1], config, tmp_path / "one.ply", "cameras.json")
+
+
+@pytest.mark.parametrize("case", ["all-transparent", "no-gaussians"])
+def test_cli_transfer_of_a_scene_nothing_of_which_can_show_is_one_error(inputs, tmp_path, capsys, case):
+    torus = read_ply(inputs[0])
+    scene = replace(torus, opacity_logits=torch.full_like(torus.opacity_logits, -8.0)) if case == "all-transparent" \
+        else torus.subset(torch.zeros(len(torus), dtype=torch.bool))
+    scene_path = tmp_path / "invisible.ply"
+    write_ply(scene_path, scene)
+    code, _, err = cli_run(capsys, "transfer", str(scene_path), str(inputs[1]), "-o", str(tmp_path / "o.ply"),
+                           "--views", "2", "--preset", "preview", "--resolution", "32", "--backend", "torch",
+                           "--device", "cpu")
+    assert code == 2 and err.count("\n") == 1 and err.startswith(f"gt2gs: error: {scene_path}: ")
+    assert ("all 288 Gaussians are fully transparent (opacity below 1/255)" if case == "all-transparent"
+            else "the file holds no Gaussians") in err
+    assert not (tmp_path / "o.ply").exists()

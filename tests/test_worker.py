@@ -14,9 +14,11 @@ import pytest
 
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
 from gt2gs_blender.core import deps
+from gt2gs_blender.core.cameras import save_cameras_json
 from gt2gs_blender.core.ply import read_ply_arrays, write_ply
 from gt2gs_blender.core.worker import EXIT_INPUT, JobSpec, write_png
 
+from .test_bad_inputs import BLIND_CAMERAS
 from .test_transfer import blob_scene, stripes
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -101,6 +103,16 @@ def test_bad_input_is_one_readable_line(job, tmp_path):
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
     assert "missing.png" in status.error and "Traceback" not in status.error
+
+
+def test_cameras_that_see_nothing_are_an_input_error_naming_the_files(job, tmp_path):
+    save_cameras_json(job.path("cameras.json"), BLIND_CAMERAS["looking-away"])
+    job.start({**transfer_spec(tmp_path), "views": "cameras.json"})
+    status = wait_for(job, lambda s: s.finished, timeout=60)
+    assert status.state == ERROR and job.process.returncode == EXIT_INPUT
+    assert status.error.startswith(f"{job.path('input.ply')}: no Gaussian is visible in any of the 3 views of "
+                                   f"{job.path('cameras.json')}: all 600 Gaussians are behind the cameras")
+    assert not job.path("out.ply").exists() and not job.path("report.json").exists()
 
 
 def test_region_restyles_only_the_masked_gaussians(job, tmp_path):

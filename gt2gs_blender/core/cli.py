@@ -32,6 +32,7 @@ from .ply import read_ply, read_ply_header, write_ply
 from .texture import load_texture
 from .rasterizer import BACKENDS, render, resolve_backend
 from .scene import GaussianScene
+from .visibility import require_visible
 from . import transfer_cmd
 
 PROG = "gt2gs"
@@ -485,7 +486,9 @@ def cmd_demo(args: argparse.Namespace) -> None:
     print(f"scene: {source} ({len(scene):,} Gaussians)")
     print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
     image = stripes_texture() if texture is None else load_texture(texture)
-    result = transfer_cmd.run_with_progress(scene, image, None, transfer_cmd.config_from_args(args))
+    config = transfer_cmd.config_from_args(args)
+    require_visible(scene, None, config, source, None)
+    result = transfer_cmd.run_with_progress(scene, image, None, config)
     args.out.mkdir(parents=True, exist_ok=True)
     write_ply(args.out / "stylised.ply", result.scene)
     atomic_write(args.out / "report.json", json.dumps(result.report, indent=1, default=str))

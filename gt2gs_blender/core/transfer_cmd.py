@@ -23,6 +23,7 @@ from .rasterizer import render
 from .scene import GaussianScene
 from .texture import load_texture
 from .transfer import Progress, TransferResult, transfer
+from .visibility import require_visible
 
 SHARED = Path(__file__).resolve().parents[2].parent / "shared"
 DEMO_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
@@ -90,12 +91,20 @@ def _views(args: argparse.Namespace) -> list[Camera] | None:
     return None
 
 
+def _views_source(args: argparse.Namespace) -> str | None:
+    """The cameras file or LLFF folder the views come from (None: automatic views), for messages."""
+    source = args.cameras if args.cameras is not None else args.llff
+    return None if source is None else str(source)
+
+
 def cmd_transfer(args: argparse.Namespace) -> None:
     """Re-texture a scene, write the stylised PLY (and report, strip), print a summary."""
     scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
     texture = load_texture(args.texture)  # inputs are checked before any work starts
     region = load_region(args.region, len(scene)) if args.region is not None else None
-    result = run_with_progress(scene, texture, _views(args), config_from_args(args), region)
+    views, config = _views(args), config_from_args(args)
+    require_visible(scene, views, config, args.scene, _views_source(args), region)
+    result = run_with_progress(scene, texture, views, config, region)
     write_ply(args.output, result.scene)
     print(f"stylised scene: {args.output}")
     _write_outputs(args.report, args.strip, scene, result, texture)

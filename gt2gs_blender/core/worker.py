@@ -173,11 +173,14 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
     """Run the texture transfer and write the result PLY and the report (atomically)."""
     from .ply import read_ply, write_ply
     from .transfer import Progress, transfer
+    from .visibility import require_visible
 
     scene = read_ply(spec.input)
     config = _config(spec)
     views = _views(spec)
     region = None if spec.region is None else load_region(spec.region)
+    require_visible(scene, views, config, spec.input, str(spec.views) if isinstance(spec.views, Path) else None,
+                    region)
     if spec.preview_dir is not None:
         spec.preview_dir.mkdir(parents=True, exist_ok=True)
     frames = 0
