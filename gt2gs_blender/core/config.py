@@ -39,6 +39,17 @@ class TransferConfig:
     densify_max_growth: float = 1.5  # no densification once the scene has grown by this factor
     skip_hidden: bool = True         # freeze Gaussians no view sees (left out of rendering and optimisation)
     hidden_threshold: float = 0.1    # ... when their blending weight summed over all pixels of all views is below this
+    skip_sh: bool = True             # render the original only up to the highest SH band with a non-zero coefficient
+    adaptive_angles: bool = False    # fewer bank angles for a texture with no strong local orientation (n_angles = most)
+    dedup_threshold: float = 0.0     # drop bank rows with a twin above this cosine in their depth group (0 = off)
+    match_channels: int = 0          # match on this many PCA channels of the bank (0 = all)
+    drop_views: bool = False         # drop views that add less than min_new_coverage of unseen covered pixels
+    min_new_coverage: float = 0.02
+    plateau_window: int = 0          # stop a phase when the mean loss of this many steps stops falling (0 = off)
+    plateau_tol: float = 0.01        # ... by less than this fraction of the window before
+    feature_scale: float = 0.5       # renders are resized by this before VGG (paper 0.5)
+    bank_cache: bool = True          # keep texture banks on disk across runs (cache_dir or $GT2GS_CACHE_DIR)
+    reuse_content: bool = True       # reuse the last run's content renders and hidden set (same scene + views)
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     features: str = "auto"           # feature network preference (see features.load_feature_extractor)
     weights_path: str | None = None  # explicit weights file or folder
@@ -47,7 +58,7 @@ class TransferConfig:
     seed: int = 0
     preview_every: int = 10          # steps between preview frames sent to the progress callback
     evaluate: bool = True            # measure the paper's metrics at the end (report["metrics"])
-    cache_dir: str | None = None     # texture-bank cache (default: ~/.cache/gt2gs_blender/banks)
+    cache_dir: str | None = None     # texture-bank cache (default: $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)
 
     def __post_init__(self) -> None:
         positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every", "rounds",
@@ -58,6 +69,12 @@ class TransferConfig:
         if self.stylise_steps < 0 or self.correct_steps < 0 or self.lr <= 0:
             raise ValueError(f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
                              f"{self.correct_steps}, {self.lr}")
+        if not 0.0 <= self.dedup_threshold <= 1.0 or self.match_channels < 0 or self.plateau_window < 0:
+            raise ValueError(f"need 0 <= dedup_threshold <= 1, match_channels >= 0 and plateau_window >= 0, got "
+                             f"{self.dedup_threshold}, {self.match_channels}, {self.plateau_window}")
+        if not 0.0 < self.feature_scale <= 4.0 or not 0.0 <= self.min_new_coverage <= 1.0:
+            raise ValueError(f"need 0 < feature_scale <= 4 and 0 <= min_new_coverage <= 1, got {self.feature_scale}, "
+                             f"{self.min_new_coverage}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         if self.device not in ("auto", "cpu", "cuda"):
@@ -104,7 +121,7 @@ donut, 16 views at 256 px: 300 + 150 steps and 72 angles bring texture match wit
 the paper's settings exactly (hours on a CPU: meant for a GPU)."""
 
 
-def preset(name: str, **overrides: Any) -> TransferConfig:
+def preset(name: str, **overrides: Any) -> "TransferConfig":
     """The named preset with optional overrides."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")

@@ -174,10 +174,15 @@ def match_with_prior(feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor
 
     The prior term is the same for every row of one angle, so each cell takes its nearest row per
     angle first and adds the penalty to those A minima only (A = angles, not the M rows): the same
-    targets as costing every row, at about the price of the cosine products alone."""
+    targets as costing every row, at about the price of the cosine products alone. A bank with a
+    ``match_basis`` (:func:`.texture_bank.compact_bank`) is matched on its projected channels."""
     c, h, w = feats.shape
     queries = F.normalize(feats.reshape(c, -1).T, dim=1, eps=COSINE_EPS)
-    rows = F.normalize(bank.features.to(queries), dim=1, eps=COSINE_EPS)
+    if bank.match_basis is not None and bank.match_features is not None:  # PCA: cosine on d < C channels
+        queries = F.normalize(queries @ bank.match_basis.to(queries), dim=1, eps=COSINE_EPS)
+        rows = bank.match_features.to(queries)
+    else:
+        rows = F.normalize(bank.features.to(queries), dim=1, eps=COSINE_EPS)
     flat_prior = prior.reshape(-1).to(queries)
     flat_groups = None if groups is None else groups.reshape(-1).to(queries.device)
     wanted = torch.ones(h * w, dtype=torch.bool, device=queries.device) if cells is None \

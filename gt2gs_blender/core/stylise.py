@@ -65,6 +65,7 @@ class StyliseStats:
     correct_steps: int = 0
     skipped_steps: int = 0
     densified: list[dict] = field(default_factory=list)
+    plateau_skipped: dict[str, int] = field(default_factory=dict)  # steps left out at a loss plateau, per phase
 
 
 def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:

@@ -71,13 +71,37 @@ class TextureBank:
     angles: tuple[float, ...]
     cells: int
     extractor_id: str
+    match_basis: torch.Tensor | None = None     # (C, d) projection for matching (PCA), None = full channels
+    match_features: torch.Tensor | None = None  # (M, d) unit rows of features @ match_basis
 
     def __len__(self) -> int:
         return int(self.features.shape[0])
 
     def to(self, device: torch.device | str) -> TextureBank:
         """The bank with its tensors on ``device``."""
-        return replace(self, features=self.features.to(device), k=self.k.to(device), theta=self.theta.to(device))
+        def move(t: torch.Tensor | None) -> torch.Tensor | None:
+            return None if t is None else t.to(device)
+        return replace(self, features=self.features.to(device), k=self.k.to(device), theta=self.theta.to(device),
+                       match_basis=move(self.match_basis), match_features=move(self.match_features))
+
+
+def compact_bank(bank: TextureBank, dedup_threshold: float = 0.0, pca_channels: int = 0) -> TextureBank:
+    """The bank for matching: rows with a near-twin (cosine above ``dedup_threshold``, > 0) earlier
+    in the same depth group dropped (labels kept, so rows need no longer come in equal runs per
+    angle), and with ``pca_channels`` > 0 (fewer than C) the matching done on that many principal
+    components (:func:`.skips.pca_basis`); the targets stay the full features."""
+    from .skips import near_duplicates, pca_basis
+
+    out = bank
+    if dedup_threshold > 0.0:
+        keep = ~near_duplicates(bank.features, bank.k, dedup_threshold)
+        out = replace(bank, features=bank.features[keep], k=bank.k[keep], theta=bank.theta[keep],
+                      match_basis=None, match_features=None)
+    if 0 < pca_channels < out.features.shape[1]:
+        basis = pca_basis(out.features, pca_channels)
+        rows = F.normalize(F.normalize(out.features.float(), dim=1) @ basis, dim=1, eps=1e-8)
+        out = replace(out, match_basis=basis, match_features=rows)
+    return out
 
 
 def bank_scales(n_scales: int, depth_ratio_range: tuple[float, float] = (1.0, 2.0)) -> tuple[float, ...]:
@@ -103,6 +127,7 @@ def build_texture_bank(
     device: torch.device | str | None = None,
     batch_pixels: int = 2**19,
     progress: Callable[[float], None] | None = None,
+    angle_offset: float = 0.0,
 ) -> TextureBank:
     """Build (or load from ``cache_dir``) the bank of ``texture`` (H,W,3) RGB float in [0,1].
 
@@ -111,7 +136,8 @@ def build_texture_bank(
     batches of at most ``batch_pixels`` input pixels, placed on ``device`` (default: the device of
     the extractor's parameters if it is a module, else the CPU). ``extractor_id`` must
     change whenever the extractor's weights or layers do (it keys the cache). ``progress`` gets the
-    fraction done after each batch (raise from it to cancel).
+    fraction done after each batch (raise from it to cancel). The angles are ``angle_offset + i *
+    360 / n_angles`` (so a start angle off the grid can be on it), ascending in [0, 360).
 
     ``max_crop`` caps the crop side (rounded down to a multiple of 16). The centre cells do not
     change while the cap covers them plus the extractor's receptive field (VGG-16 relu3_3: 32 + 40
@@ -126,7 +152,7 @@ def build_texture_bank(
     if image.ndim != 3 or image.shape[2] != 3:
         raise ValueError(f"texture must be (H, W, 3), got {image.shape}")
     scales = bank_scales(n_scales, depth_ratio_range)
-    angles = tuple(i * 360.0 / n_angles for i in range(n_angles))
+    angles = tuple(sorted((angle_offset + i * 360.0 / n_angles) % 360.0 for i in range(n_angles)))
     settings = {"scales": scales, "angles": angles, "texture_height": texture_height, "cells": cells,
                 "max_crop": max_crop, "extractor_id": extractor_id, "schema": CACHE_SCHEMA}
     path = None if cache_dir is None else Path(cache_dir) / f"bank-{_cache_key(image, settings)}.npz"

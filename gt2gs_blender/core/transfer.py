@@ -8,6 +8,7 @@ frames; a cancel callable is polled between steps and raises ``Cancelled``.
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import time
 from collections.abc import Callable, Sequence
@@ -22,8 +23,16 @@ from .cameras import Camera, auto_views
 from .config import TransferConfig
 from .errors import GT2GSError
 from .features import FeatureExtractor, load_feature_extractor
+from .gt2 import view_order
 from .rasterizer import render
 from .scene import GaussianScene, concat
+from .skips import (
+    Plateau,
+    angles_for,
+    redundant_views,
+    texture_anisotropy,
+    used_sh_degree,
+)
 from .stylise import (
     Styliser,
     StyliseStats,
@@ -36,6 +45,7 @@ from .texture_bank import (
     TextureBank,
     build_texture_bank,
     cell_groups,
+    compact_bank,
     covered_cells,
     depth_groups,
 )
@@ -81,6 +91,11 @@ class ViewSet:
 
     def composited(self, v: int) -> torch.Tensor:
         return self.premultiplied[v] + (1.0 - self.alphas[v][..., None]) * self.background
+
+    def subset(self, keep: Sequence[int]) -> ViewSet:
+        """The views ``keep`` (indices, in that order)."""
+        return ViewSet([self.cameras[v] for v in keep], [self.premultiplied[v] for v in keep],
+                       [self.alphas[v] for v in keep], [self.depths[v] for v in keep], self.background)
 
 
 @dataclass
@@ -138,11 +153,11 @@ def fit_cameras(scene: GaussianScene, views: Sequence[Camera] | int | None, reso
 
 @torch.no_grad()
 def render_views(scene: GaussianScene, cameras: Sequence[Camera], background: torch.Tensor,
-                 backend: str) -> ViewSet:
-    """Render every camera once (colour over black, alpha, depth)."""
+                 backend: str, sh_degree: int | None = None) -> ViewSet:
+    """Render every camera once (colour over black, alpha, depth), SH up to ``sh_degree`` (None = all)."""
     premultiplied, alphas, depths = [], [], []
     for cam in cameras:
-        out = render(scene, [cam], backend=backend)
+        out = render(scene, [cam], backend=backend, sh_degree=sh_degree)
         premultiplied.append(out.colors[0])
         alphas.append(out.alphas[0])
         depths.append(out.depths[0])
@@ -163,8 +178,28 @@ def _load_texture(texture: np.ndarray | str | os.PathLike) -> np.ndarray:
     return load_texture(texture)
 
 
-def _cache_dir(config: TransferConfig) -> Path:
-    return Path(config.cache_dir) if config.cache_dir else Path.home() / ".cache" / "gt2gs_blender" / "banks"
+CACHE_ENV = "GT2GS_CACHE_DIR"
+"""Environment variable naming the texture-bank cache folder when the config gives none."""
+
+
+def _cache_dir(config: TransferConfig) -> Path | None:
+    """The bank cache folder: the config's, else $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks;
+    None when ``bank_cache`` is off."""
+    if not config.bank_cache:
+        return None
+    if config.cache_dir:
+        return Path(config.cache_dir)
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    return Path.home() / ".cache" / "gt2gs_blender" / "banks"
+
+
+def bank_angle_count(texture: np.ndarray, config: TransferConfig) -> int:
+    """The bank's angle count: ``n_angles``, or with ``adaptive_angles`` fewer for a texture with
+    no strong local orientation (:func:`.skips.angles_for`)."""
+    if not config.adaptive_angles:
+        return config.n_angles
+    return angles_for(texture_anisotropy(texture), config.n_angles)
 
 
 def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarray,
@@ -190,10 +225,12 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
         tracker.check_cancel()
         tracker.tell(int(fraction * 100), 100, "texture feature bank")
 
+    n_angles = bank_angle_count(texture, config)
     return build_texture_bank(
         texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
-        n_scales=config.n_scales, n_angles=config.n_angles, texture_height=config.texture_height,
+        n_scales=config.n_scales, n_angles=n_angles, texture_height=config.texture_height,
         max_crop=BANK_MAX_CROP, cache_dir=_cache_dir(config), device=device, progress=report,
+        angle_offset=config.angle % (360.0 / n_angles),
     ).to(device)
 
 
@@ -226,7 +263,8 @@ def stylise(scene: GaussianScene, views: ViewSet, targets: list[ViewTargets], ba
     phases = styliser.phases()
     total, step = sum(n for _, n, _ in phases), 0
     for phase, steps, densify in phases:
-        for _ in range(steps):
+        plateau = Plateau(config.plateau_window, config.plateau_tol)
+        for done in range(steps):
             tracker.check_cancel()
             if phase == "stylise":
                 loss, image = styliser.stylise_step(densify)
@@ -237,6 +275,11 @@ def stylise(scene: GaussianScene, views: ViewSet, targets: list[ViewTargets], ba
                 message = f"preserve geometry: loss {loss:.4f}"
             step += 1
             tracker.tell(step, total, message, preview)
+            if plateau.update(loss) and done + 1 < steps:
+                styliser.report.plateau_skipped[phase] = styliser.report.plateau_skipped.get(phase, 0) \
+                    + steps - done - 1
+                step += steps - done - 1
+                break
     return styliser.scene.detach(), None if frozen is None else styliser.opt.frozen.clone(), styliser.report
 
 
@@ -271,10 +314,8 @@ def transfer(
     cameras = fit_cameras(original if selected is None else original.subset(selected), views, config.resolution,
                           config.n_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
-    content = render_views(original, cameras, background, config.backend)
+    content, hidden = _content_and_hidden(original, cameras, background, config)
     start = work = original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
-    hidden = hidden_gaussians(original, cameras, config.hidden_threshold, config.backend) \
-        if config.skip_hidden else None
     if hidden is not None and selected is not None and not bool((selected & ~hidden).any()):
         hidden = None  # the whole region is hidden: restyle it as asked
     if hidden is not None:
@@ -282,17 +323,21 @@ def transfer(
     region = selected if selected is None or hidden is None else selected[~hidden]
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
-    extractor = load_feature_extractor(config.features, config.weights_path, device)
-    targets = view_targets(content, work, extractor, config, config.backend)
+    extractor = load_feature_extractor(config.features, config.weights_path, device, scale=config.feature_scale)
+    dropped = redundant_views(cameras, content.depths, content.alphas, view_order(cameras), config.min_new_coverage) \
+        if config.drop_views and len(cameras) > 2 else []
+    used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content
+    targets = view_targets(used, work, extractor, config, config.backend)
     tracker.end()
 
     tracker.begin("bank")
     bank = build_bank(image, extractor, config, device, tracker)
+    matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
     tracker.end()
 
     tracker.begin("stylise")
     frozen = None if region is None else ~region
-    work, frozen, stats = stylise(work, content, targets, bank, extractor, config, tracker, frozen)
+    work, frozen, stats = stylise(work, used, targets, matching, extractor, config, tracker, frozen)
     tracker.end()
 
     tracker.begin("finish")
@@ -306,9 +351,58 @@ def transfer(
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
                          "region": None if selected is None else int(selected.sum())}
-    report["skips"] = {"hidden": None if hidden is None else int(hidden.sum())}
+    report["skips"] = {"hidden": None if hidden is None else int(hidden.sum()),
+                       "sh_degree": [original.sh_degree, _content_degree(original, config)],
+                       "bank_angles": len(bank.angles), "bank_rows_matched": len(matching),
+                       "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
+                       "dropped_views": dropped, "plateau_skipped": dict(stats.plateau_skipped)}
     tracker.tell(1, 1, "done")
     return TransferResult(scene=work.to("cpu"), report=report)
+
+
+_CONTENT_CACHE: dict[str, tuple[ViewSet, torch.Tensor | None]] = {}
+"""The last run's content renders and hidden set, by :func:`_content_key` (one entry: a re-run with
+another texture, angle or schedule on the same scene and views reuses them)."""
+
+
+def clear_caches() -> None:
+    """Forget the in-process content cache (the disk bank cache stays)."""
+    _CONTENT_CACHE.clear()
+
+
+def _content_degree(scene: GaussianScene, config: TransferConfig) -> int:
+    """SH degree the original is rendered at: the highest band in use with ``skip_sh``, else all."""
+    return used_sh_degree(scene) if config.skip_sh else scene.sh_degree
+
+
+def _content_key(scene: GaussianScene, cameras: Sequence[Camera], background: torch.Tensor,
+                 config: TransferConfig) -> str:
+    """sha256 of the scene's tensors, the cameras and every setting the content renders depend on."""
+    digest = hashlib.sha256(repr((config.backend, config.skip_sh, config.skip_hidden, config.hidden_threshold,
+                                  background.tolist(), str(scene.device), str(scene.dtype))).encode())
+    for name, tensor in scene.tensors().items():
+        digest.update(name.encode() + repr(tuple(tensor.shape)).encode())
+        digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
+    for cam in cameras:
+        digest.update(repr((np.asarray(cam.world_to_cam).tolist(), cam.fx, cam.fy, cam.cx, cam.cy, cam.width,
+                            cam.height)).encode())
+    return digest.hexdigest()
+
+
+def _content_and_hidden(original: GaussianScene, cameras: Sequence[Camera], background: torch.Tensor,
+                        config: TransferConfig) -> tuple[ViewSet, torch.Tensor | None]:
+    """The original's renders from the cameras and its hidden Gaussians (None when not skipped or
+    none), from the in-process cache when ``reuse_content`` and the same scene and views ran last."""
+    key = _content_key(original, cameras, background, config) if config.reuse_content else None
+    if key is not None and key in _CONTENT_CACHE:
+        return _CONTENT_CACHE[key]
+    content = render_views(original, cameras, background, config.backend, _content_degree(original, config))
+    hidden = hidden_gaussians(original, cameras, config.hidden_threshold, config.backend) \
+        if config.skip_hidden else None
+    if key is not None:
+        _CONTENT_CACHE.clear()
+        _CONTENT_CACHE[key] = (content, hidden)
+    return content, hidden
 
 
 HIDDEN_CAMERAS_PER_CALL = 4
