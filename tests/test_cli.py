@@ -2,12 +2,13 @@
 
 Most run ``main([...])`` in-process on small generated scenes, rendering with the portable torch
 backend (no compiler needed) except the demo and default-backend tests, which use the automatic
-choice (the fast CPU kernel where it builds); one test runs ``python -m gt2gs_blender`` as a real
-subprocess.
+choice (the fast CPU kernel where it builds); two run ``python -m gt2gs_blender`` as a real
+subprocess (one of them with its address space capped, to run out of memory for real).
 """
 from __future__ import annotations
 
 import json
+import resource
 import subprocess
 import sys
 from pathlib import Path
@@ -20,6 +21,8 @@ import torch
 from gt2gs_blender.core import cli
 from gt2gs_blender.core.cameras import auto_views, load_cameras_json, save_cameras_json
 from gt2gs_blender.core.ply import read_ply, write_ply
+
+from .test_worker import OUT_OF_MEMORY, address_space_cap, needs_prlimit
 
 REPO = Path(__file__).resolve().parents[1]
 DONUT = REPO.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -253,6 +256,26 @@ def test_transfer_command_bad_texture_is_one_line(capsys, small_ply, tmp_path):
     assert code == 2
     assert_one_line_error(err, str(bad))
     assert not (tmp_path / "o.ply").exists()
+
+
+@needs_prlimit
+def test_transfer_out_of_memory_is_one_line_and_writes_nothing(small_ply, tmp_path):
+    """A real allocation failure: the command runs with its address space capped (RLIMIT_AS) and asks
+    for 4096 px views; it used to end as an 'internal error' quoting torch's allocator."""
+    cap = address_space_cap()
+    out = tmp_path / "out" / "styled.ply"
+    out.parent.mkdir()
+    result = subprocess.run(
+        [sys.executable, "-m", "gt2gs_blender", "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
+         "--report", str(out.parent / "r.json"), *PORTABLE, "--preset", "preview", "--views", "3", "--steps", "2",
+         "--resolution", "4096"],
+        cwd=REPO, capture_output=True, text=True, timeout=300,
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (cap, cap)))
+    assert result.returncode == 2, result.stderr
+    errors = [line for line in result.stderr.splitlines() if line.startswith("gt2gs: error: ")]
+    assert len(errors) == 1 and "Traceback" not in result.stderr
+    assert OUT_OF_MEMORY.fullmatch(errors[0].removeprefix("gt2gs: error: ")), errors[0]
+    assert list(out.parent.iterdir()) == []
 
 
 def stripe_png(folder: Path) -> Path:

@@ -1,8 +1,11 @@
 """The worker process and its Blender-side handle (bpy-free): events, outputs, cancel, crash, bad input."""
 from __future__ import annotations
 
+import functools
 import json
 import os
+import re
+import resource
 import signal
 import subprocess
 import sys
@@ -16,7 +19,8 @@ from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
 from gt2gs_blender.core import deps
 from gt2gs_blender.core.cameras import save_cameras_json
 from gt2gs_blender.core.ply import read_ply_arrays, write_ply
-from gt2gs_blender.core.worker import EXIT_INPUT, JobSpec, write_png
+from gt2gs_blender.core.errors import MEMORY_ADVICE
+from gt2gs_blender.core.worker import EXIT_INPUT, EXIT_MEMORY, JobSpec, write_png
 
 from .test_bad_inputs import BLIND_CAMERAS
 from .test_transfer import blob_scene, stripes
@@ -24,6 +28,28 @@ from .test_transfer import blob_scene, stripes
 ROOT = Path(__file__).resolve().parents[1]
 TINY = dict(resolution=48, n_views=3, stylise_steps=6, n_scales=2, n_angles=4, texture_height=96, evaluate=False,
             preview_every=2)
+
+
+HEADROOM = 1 << 30
+"""Address space a capped worker may add to what torch and the engine take once loaded: a tiny job
+peaks ~150 MiB above that, a job at 4096 px needs several GiB."""
+OUT_OF_MEMORY = re.compile(rf"ran out of memory( \(an allocation of [\d.]+ (bytes|MiB|GiB) failed\))?: "
+                           rf"{re.escape(MEMORY_ADVICE)}")
+"""The message of a failed allocation: torch's allocators say the size; a bare MemoryError does not."""
+needs_prlimit = pytest.mark.skipif(not hasattr(resource, "prlimit") or not Path("/proc/self/status").exists(),
+                                   reason="capping another process's address space needs Linux")
+
+
+@functools.cache
+def address_space_cap() -> int:
+    """Bytes of address space for a capped worker: what a fresh Python takes once torch and the
+    engine are loaded (as the worker will have them), plus HEADROOM."""
+    probe = ("import pathlib, gt2gs_blender.core.transfer, gt2gs_blender.core.visibility; "
+             "print(next(l.split()[1] for l in pathlib.Path('/proc/self/status').read_text().splitlines() "
+             "if l.startswith('VmSize:')))")
+    result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                            check=True)
+    return int(result.stdout) * 1024 + HEADROOM
 
 
 def colours_differ(a: np.ndarray, b: np.ndarray, tol: float = 0.02) -> bool:
@@ -95,7 +121,23 @@ def test_killed_worker_is_a_clear_error(job, tmp_path):
     os.kill(job.process.pid, signal.SIGKILL)
     status = wait_for(job, lambda s: s.finished, timeout=20)
     assert status.state == ERROR and "killed by signal 9" in status.error
+    assert f"how the system stops a process when memory runs out: {MEMORY_ADVICE}" in status.error
     assert not job.path("out.ply").exists()
+
+
+@needs_prlimit
+def test_out_of_memory_is_a_clear_error_and_leaves_no_files(job, tmp_path):
+    """A real allocation failure: the worker's address space is capped as soon as it starts, then the
+    job asks for 4096 px views on the CPU."""
+    cap = address_space_cap()  # measured first: the worker must be capped before it gets far
+    job.start(transfer_spec(tmp_path, resolution=4096, device="cpu"))
+    resource.prlimit(job.process.pid, resource.RLIMIT_AS, (cap, cap))  # past it, allocations fail for real
+    status = wait_for(job, lambda s: s.finished, timeout=120)
+    assert status.state == ERROR and job.process.returncode == EXIT_MEMORY, (status, job.stderr_tail())
+    assert OUT_OF_MEMORY.fullmatch(status.error), status.error
+    assert any("can't allocate memory" in line or "MemoryError" in line for line in job.stderr_tail())
+    written = {p.relative_to(job.folder).as_posix() for p in job.folder.rglob("*") if p.is_file()}
+    assert written == {"job.json", "input.ply", "texture.png"}
 
 
 def test_bad_input_is_one_readable_line(job, tmp_path):

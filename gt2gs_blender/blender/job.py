@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from ..core.deps import worker_pythonpath
+from ..core.errors import MEMORY_ADVICE
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 """The extension's package folder; the worker is imported from its parent under the same name."""
@@ -36,6 +37,8 @@ STDERR_LINES = 40
 IDLE, RUNNING, DONE, ERROR, CANCELLED = "IDLE", "RUNNING", "DONE", "ERROR", "CANCELLED"
 FINISHED_STATES = (DONE, ERROR, CANCELLED)
 EXIT_CANCELLED = 3
+SIGKILL = 9
+"""Unblockable kill (POSIX): what the out-of-memory killer (Linux) and jetsam (macOS) send."""
 
 
 @dataclass
@@ -169,6 +172,8 @@ class Job:
             if status.error is None:
                 tail = [line for line in self._stderr if line.strip()][-3:]
                 how = f"was killed by signal {-code}" if code < 0 else f"exited with status {code}"
+                if code == -SIGKILL:
+                    how += f" (SIGKILL, how the system stops a process when memory runs out: {MEMORY_ADVICE})"
                 status.error = f"the worker process {how}" + (": " + " | ".join(tail) if tail else "")
             status.message = status.error
 

@@ -1,8 +1,8 @@
 """The command line, ``python -m gt2gs_blender``: inspect a 3DGS PLY, render it, run the demo, fit one.
 
-Errors the user can fix (bad files, bad arguments) print one line on stderr and exit with 2; any
-other exception is a bug, also reported in one line, with exit code 1; ``--debug`` adds the
-traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
+Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line
+on stderr and exit with 2; any other exception is a bug, also reported in one line, with exit code
+1; ``--debug`` adds the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from .cameras import Camera, auto_views, load_views, save_cameras_json
-from .errors import GT2GSError
+from .errors import GT2GSError, out_of_memory_message
 from .fit import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, TextProgress, fit_llff
 from .atomic import atomic_write
 from .ply import read_ply, read_ply_header, write_ply
@@ -60,7 +60,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             return _fail(args.debug, "interrupted", 130)
         except (GT2GSError, OSError, ValueError) as exc:
             return _fail(args.debug, _user_message(exc), EXIT_USER)
-        except Exception as exc:  # a bug: one line unless --debug
+        except Exception as exc:  # out of memory (the user can ask for less), else a bug: one line unless --debug
+            memory = out_of_memory_message(exc)
+            if memory is not None:
+                return _fail(args.debug, memory, EXIT_USER)
             hint = "" if args.debug else " (run with --debug for the traceback)"
             return _fail(args.debug, f"internal error{hint}: {type(exc).__name__}: {exc}", EXIT_INTERNAL)
     return 0

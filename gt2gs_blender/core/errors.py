@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import re
 
 
 class GT2GSError(Exception):
@@ -23,3 +24,29 @@ class PlyFormatError(InputFileError):
 
 class CameraFileError(InputFileError):
     """A camera/pose file (cameras.json, poses_bounds.npy, COLMAP model) is malformed."""
+
+
+MEMORY_ADVICE = "try the preview preset, fewer views or a lower resolution"
+"""What to change when a job does not fit in memory (the worker, the CLI and Blender say it)."""
+_ALLOCATION_FAILURES = ("can't allocate memory", "not enough memory", "out of memory")
+"""How torch's allocators word a failure: CPU (Linux, Windows) and CUDA/MPS (torch.OutOfMemoryError)."""
+_REQUEST = re.compile(r"allocate ([\d.]+) ?(bytes|[KMGTPE]iB)", re.IGNORECASE)
+"""The size in torch's ("tried to allocate 541155328 bytes", "Tried to allocate 20.00 MiB") and numpy's messages."""
+
+
+def out_of_memory_message(exc: BaseException) -> str | None:
+    """The user's line when ``exc`` is a failed allocation (MemoryError, or torch's RuntimeError from
+    its CPU or GPU allocator, which is not a MemoryError), with the size asked for; None otherwise."""
+    text = str(exc)
+    if not (isinstance(exc, MemoryError)
+            or (isinstance(exc, RuntimeError) and any(words in text for words in _ALLOCATION_FAILURES))):
+        return None
+    request = _REQUEST.search(text)
+    if request is None:
+        return f"ran out of memory: {MEMORY_ADVICE}"
+    amount, unit = request.groups()
+    if unit.lower() == "bytes":
+        n = float(amount)
+        amount, unit = (f"{n / 2**30:.1f}", "GiB") if n >= 2**30 else (f"{n / 2**20:.0f}", "MiB") if n >= 2**20 \
+            else (f"{n:,.0f}", "bytes")
+    return f"ran out of memory (an allocation of {amount} {unit} failed): {MEMORY_ADVICE}"

@@ -13,8 +13,9 @@ Events go to stdout as JSON lines (stray prints of libraries are sent to stderr 
 preview is the path of a PNG frame, written atomically, or null), then exactly one of
 ``{"event": "done", "output", "report"}``, ``{"event": "cancelled"}`` or
 ``{"event": "error", "message"}``. Exit status: 0 done, 1 internal error, 2 unusable input,
-3 cancelled (a cancel file appeared or SIGTERM arrived). Outputs are written atomically and only
-on success, so a cancelled or failed run leaves no result behind.
+3 cancelled (a cancel file appeared or SIGTERM arrived), 4 out of memory (an allocation failed; the
+message says what to lower). Outputs are written atomically and only on success, so a cancelled or
+failed run leaves no result behind.
 """
 from __future__ import annotations
 
@@ -30,9 +31,9 @@ from typing import IO, Any, Callable
 import numpy as np
 
 from .atomic import atomic_write
-from .errors import GT2GSError, InputFileError
+from .errors import GT2GSError, InputFileError, out_of_memory_message
 
-EXIT_DONE, EXIT_INTERNAL, EXIT_INPUT, EXIT_CANCELLED = 0, 1, 2, 3
+EXIT_DONE, EXIT_INTERNAL, EXIT_INPUT, EXIT_CANCELLED, EXIT_MEMORY = 0, 1, 2, 3, 4
 KINDS = ("transfer", "preview")
 
 
@@ -243,12 +244,12 @@ def run(job_file: str | os.PathLike, events: Events) -> int:
         events("error", message=f"the Python package {exc.name or exc} is missing in the worker's Python: "
                                 "install the dependencies (add-on preferences, or pip install -r requirements.txt)")
         return EXIT_INTERNAL
-    except MemoryError:
-        events("error", message="not enough memory for this job: use a smaller preset, fewer views or a lower "
-                                "resolution")
-        return EXIT_INTERNAL
     except Exception as exc:
         traceback.print_exc()
+        memory = out_of_memory_message(exc)
+        if memory is not None:
+            events("error", message=memory)
+            return EXIT_MEMORY
         events("error", message=f"internal error: {type(exc).__name__}: {exc}")
         return EXIT_INTERNAL
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import glob
 import os
+import resource
 import signal
 import sys
 import tempfile
@@ -19,12 +20,13 @@ from gt2gs_blender.blender import splats, transfer_run, views  # noqa: E402
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus  # noqa: E402
 from gt2gs_blender.core import deps  # noqa: E402
 from gt2gs_blender.core.cameras import load_cameras_json  # noqa: E402
+from gt2gs_blender.core.errors import MEMORY_ADVICE  # noqa: E402
 from gt2gs_blender.core.ply import write_ply  # noqa: E402
 from gt2gs_blender.core.worker import write_png  # noqa: E402
 from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view  # noqa: E402
 
 from ..test_transfer import blob_scene, stripes  # noqa: E402
-from ..test_worker import colours_differ  # noqa: E402
+from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit  # noqa: E402
 from .conftest import SHARED  # noqa: E402
 
 pytestmark = pytest.mark.blender
@@ -168,10 +170,27 @@ def test_killed_worker_is_a_clear_error_and_the_scene_is_unchanged(blob):
     os.kill(run.job.process.pid, signal.SIGKILL)
     status = tick_until(run, lambda s: s.finished, timeout=20)
     assert status.state == ERROR and "worker process was killed by signal 9" in status.error
+    assert f"when memory runs out: {MEMORY_ADVICE}" in status.error
     outcome = run.finish()
     assert same(snapshot(), before) and not run.job.folder.exists()
     view = transfer_view(blob.name, None, outcome)
     assert view.state == ERROR and view.message.startswith("Failed: the worker process was killed")
+
+
+@needs_prlimit
+def test_worker_out_of_memory_is_a_clear_error_and_the_scene_is_unchanged(blob):
+    """A real allocation failure: the worker's address space is capped as it starts, then it is asked
+    for 4096 px views on the CPU."""
+    settings = bpy.context.scene.gt2gs
+    settings.resolution, settings.device = 4096, "CPU"
+    before, folders, cap = snapshot(), job_folders(), address_space_cap()
+    run = transfer_run.TransferRun.start(bpy.context, {})
+    resource.prlimit(run.job.process.pid, resource.RLIMIT_AS, (cap, cap))
+    status = tick_until(run, lambda s: s.finished)
+    assert status.state == ERROR and OUT_OF_MEMORY.fullmatch(status.error), status.error
+    outcome = run.finish()
+    assert same(snapshot(), before) and job_folders() == folders and not transfer_run.ACTIVE
+    assert transfer_view(blob.name, None, outcome).message == f"Failed: {status.error}"
 
 
 def test_unusable_texture_is_reported_and_nothing_starts(blob):
