@@ -57,7 +57,7 @@ def sh_color(coeffs: np.ndarray, d: np.ndarray, degree: int) -> np.ndarray:
 
 
 def render_reference(means, quats, scales, opacities, colors, viewmat, k, width, height, sh_degree=None):
-    """Render one camera. Inputs are numpy arrays (cast to float64); colors (N,3) or SH (N,K,3)."""
+    """Render one camera. Inputs are numpy arrays (cast to float64); colors (N,D) or SH (N,K,3)."""
     means, quats, scales, opacities, colors, viewmat, k = (
         np.asarray(a, dtype=np.float64) for a in (means, quats, scales, opacities, colors, viewmat, k)
     )
@@ -89,7 +89,7 @@ def render_reference(means, quats, scales, opacities, colors, viewmat, k, width,
             rgb = sh_color(colors[i], d / np.linalg.norm(d), sh_degree)
         splats.append((p[2], u, v, conic, opacities[i], rgb))
     splats.sort(key=lambda s: s[0])
-    color = np.zeros((height, width, 3))
+    color = np.zeros((height, width, colors.shape[1] if sh_degree is None else 3))
     depth = np.zeros((height, width))
     trans_map = np.ones((height, width))
     done = np.zeros((height, width), dtype=bool)

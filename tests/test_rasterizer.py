@@ -83,6 +83,17 @@ def test_matches_reference_random_scenes(backend, sh_degree):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("channels", [1, 6])
+def test_matches_reference_any_channel_count(backend, channels):
+    """Colour channel counts other than RGB (1 + depth, 6 + depth: the kernels' run-time channel path)."""
+    means, quats, scales, opacities, _ = random_gaussians(300, None, seed=11)
+    colors = torch.rand(300, channels, generator=torch.Generator().manual_seed(1))
+    viewmats, ks = two_cameras()
+    out = compare_to_reference((means, quats, scales, opacities, colors), viewmats, ks, 61, 47, backend, None)
+    assert out.colors.shape[-1] == channels and out.alphas.max() > 0.5
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 def test_matches_reference_extreme_gaussians(backend):
     """Tiny, huge and 1000:1 anisotropic Gaussians, and ones near, on and behind the near plane."""
     viewmats, ks = two_cameras(40, 32)

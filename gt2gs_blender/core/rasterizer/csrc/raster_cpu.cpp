@@ -11,12 +11,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 #include <vector>
 
 namespace {
 
 constexpr int kTile = 8;
-constexpr int kTilePixels = kTile * kTile;
 constexpr int kMaxChannels = 32;
 
 template <typename T>
@@ -28,16 +28,8 @@ struct Rules {  // the alpha rules in the kernel's precision
 template <typename T>
 struct Splat {
   T mx, my, a, b, c, opacity, log_min;  // log_min: power below which alpha < 1/255
+  int32_t row_lo, row_hi;                // the tile rows its alpha >= 1/255 ellipse can reach
 };
-
-// Power of the Gaussian at a pixel centre; the same expression in forward and backward so that
-// both make the same skip decisions.
-template <typename T>
-inline T splat_power(const Splat<T>& s, T px, T py, T& dx, T& dy) {
-  dx = s.mx - px;
-  dy = s.my - py;
-  return T(-0.5) * (s.a * dx * dx + s.c * dy * dy) - s.b * dx * dy;
-}
 
 int num_threads() { return std::max(1, at::get_num_threads()); }
 
@@ -51,16 +43,49 @@ void check_inputs(const torch::Tensor& means2d, const torch::Tensor& conics, con
   TORCH_CHECK(colors.size(1) >= 1 && colors.size(1) <= kMaxChannels, "colors must have 1..32 channels");
 }
 
-// Gathers the splats of one tile's list into a contiguous local buffer (cache friendly).
+// Rows [lo, hi] of a tile (clipped to [0, last]) whose pixel centres lie within `half` of `centre`;
+// every row when the extent or the centre is not finite or beyond 1e6 px.
 template <typename T>
-void gather_tile(const T* means2d, const T* conics, const T* opacities, const int32_t* pair_gauss,
-                 int64_t begin, int64_t end, std::vector<Splat<T>>& out) {
+inline void row_range(T centre, T half, int64_t origin, int32_t last, int32_t& lo, int32_t& hi) {
+  lo = 0, hi = last;
+  if (!(half < T(1e6)) || !(std::abs(centre) < T(1e6))) return;  // also NaN
+  const T first = std::ceil(centre - half - T(0.5)) - T(origin), final = std::floor(centre + half - T(0.5)) - T(origin);
+  lo = first > T(0) ? static_cast<int32_t>(std::min(first, T(last + 1))) : 0;
+  hi = final < T(last) ? static_cast<int32_t>(std::max(final, T(-1))) : last;
+}
+
+// Per entry, what gather_tile needs beyond the raw arrays: log_min = -log(255 o) (the power below which
+// alpha < 1/255) and the half height of the alpha >= 1/255 ellipse, sqrt(r2 cov_yy) with cov = conic^-1
+// and r2 = -2 log_min, padded by 1e-2 px so that float rounding cannot cut off a lit pixel (infinite
+// for a degenerate conic: every row).
+template <typename T>
+struct Footprints {
+  std::vector<T> log_min, half_height;
+
+  Footprints(const T* conics, const T* opacities, int64_t m) : log_min(m), half_height(m) {
+#pragma omp parallel for num_threads(num_threads()) schedule(static)
+    for (int64_t g = 0; g < m; ++g) {
+      const T a = conics[3 * g], b = conics[3 * g + 1], c = conics[3 * g + 2];
+      const T lm = -std::log(T(255) * opacities[g]), det = a * c - b * b, r2 = T(-2) * lm;
+      log_min[g] = lm;
+      half_height[g] = det > T(0) && r2 >= T(0) ? std::sqrt(r2 * a / det) + T(1e-2) : T(INFINITY);
+    }
+  }
+};
+
+// Gathers the splats of one tile's list into a contiguous local buffer (cache friendly), each with the
+// rows of the tile it can reach.
+template <typename T>
+void gather_tile(const T* means2d, const T* conics, const T* opacities, const Footprints<T>& foot,
+                 const int32_t* pair_gauss, int64_t begin, int64_t end, int64_t y0, int32_t last_row,
+                 std::vector<Splat<T>>& out) {
   out.resize(end - begin);
   for (int64_t k = begin; k < end; ++k) {
     const int32_t g = pair_gauss[k];
-    const T o = opacities[g];
-    out[k - begin] = Splat<T>{means2d[2 * g], means2d[2 * g + 1], conics[3 * g], conics[3 * g + 1],
-                              conics[3 * g + 2], o, -std::log(T(255) * o)};
+    Splat<T>& s = out[k - begin];
+    s = Splat<T>{means2d[2 * g], means2d[2 * g + 1], conics[3 * g], conics[3 * g + 1], conics[3 * g + 2],
+                 opacities[g], foot.log_min[g], 0, last_row};
+    row_range(s.my, foot.half_height[g], y0, last_row, s.row_lo, s.row_hi);
   }
 }
 
@@ -109,12 +134,104 @@ std::vector<torch::Tensor> bin_tiles(torch::Tensor tile_bbox, torch::Tensor cam_
 
 namespace {
 
+// Both sweeps go splat by splat over a tile's depth-sorted list and, for each splat, over the tile's
+// rows it can reach whose pixels are still compositing; a row's 8 pixels are vector lanes and a pixel
+// that is done or not hit is a masked lane, so every pixel computes what a pixel-by-pixel loop would,
+// in the same order (~2x faster than that loop with AVX2 lanes). NC > 0 fixes the channel count at
+// compile time (3: RGB, 4: RGB + depth) so the channel loops unroll; NC = 0 reads it at run time.
+template <int NC>
+struct Channels : std::integral_constant<int, NC> {};
+
+template <typename F>
+void dispatch_channels(int64_t c, F&& run) {
+  if (c == 3) return run(Channels<3>{});
+  if (c == 4) return run(Channels<4>{});
+  run(Channels<0>{});
+}
+
+// One tile row as a vector of 8 lanes (GCC vector extensions: AVX when compiled for it, else pairs of
+// SSE registers), with its integer mask type of the same width.
 template <typename T>
+struct Lanes;
+template <>
+struct Lanes<float> {
+  typedef float V __attribute__((vector_size(32)));
+  typedef int32_t M __attribute__((vector_size(32)));
+  typedef int32_t I;
+};
+template <>
+struct Lanes<double> {
+  typedef double V __attribute__((vector_size(64)));
+  typedef int64_t M __attribute__((vector_size(64)));
+  typedef int64_t I;
+};
+
+// exp of every lane, for the powers the kernels evaluate (in [log(1/255) - 1, 0]). Float lanes: 2^n e^f
+// with n = round(x / ln 2) and a degree-7 Taylor polynomial on |f| <= ln(2)/2 (relative error < 1e-8,
+// below float's resolution), written with vector operations so that it vectorises; double lanes
+// (tests, gradcheck) use std::exp.
+inline Lanes<float>::V exp_lanes(Lanes<float>::V x) {
+  using V = Lanes<float>::V;
+  using M = Lanes<float>::M;
+  x = x < -87.0f ? V{} - 87.0f : x;
+  const V n = (x * 1.44269504088896341f + 12582912.0f) - 12582912.0f;
+  const V f = (x - n * 0.693145751953125f) - n * 1.42860682030941723212e-6f;
+  V p = V{} + 1.0f / 5040.0f;
+  p = p * f + 1.0f / 720.0f;
+  p = p * f + 1.0f / 120.0f;
+  p = p * f + 1.0f / 24.0f;
+  p = p * f + 1.0f / 6.0f;
+  p = p * f + 0.5f;
+  p = p * f + 1.0f;
+  p = p * f + 1.0f;
+  const M bits = (__builtin_convertvector(n, M) + 127) << 23;
+  return p * (V)bits;  // a cast between vector types of one size reinterprets the bits
+}
+
+inline Lanes<double>::V exp_lanes(Lanes<double>::V x) {
+  for (int l = 0; l < kTile; ++l) x[l] = std::exp(x[l]);
+  return x;
+}
+
+template <typename M>
+inline bool any_lane(M mask) {
+  bool any = false;
+  for (int l = 0; l < kTile; ++l) any |= mask[l] != 0;
+  return any;
+}
+
+// Power of a splat's Gaussian at a row of pixel centres (offsets dx, dy from them); one expression for
+// both sweeps, so that forward and backward make the same skip decisions.
+template <typename T, typename V>
+inline V power_lanes(const Splat<T>& s, V dx, V dy) {
+  return T(-0.5) * (s.a * dx * dx + s.c * dy * dy) - s.b * dx * dy;
+}
+
+struct TileOrigin {
+  int64_t cam, x0, y0;
+  int32_t last_x, last_y;  // last tile-relative column and row inside the image
+
+  TileOrigin(int64_t tile, int64_t tiles_x, int64_t tiles_y, int64_t width, int64_t height)
+      : cam(tile / (tiles_x * tiles_y)),
+        x0((tile % (tiles_x * tiles_y) % tiles_x) * kTile),
+        y0((tile % (tiles_x * tiles_y) / tiles_x) * kTile),
+        last_x(static_cast<int32_t>(std::min<int64_t>(kTile, width - x0) - 1)),
+        last_y(static_cast<int32_t>(std::min<int64_t>(kTile, height - y0) - 1)) {}
+
+  int64_t pixel(int64_t width, int64_t height, int32_t row, int32_t col) const {
+    return (cam * height + y0 + row) * width + x0 + col;
+  }
+};
+
+template <typename T, int NC>
 void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
                   const torch::Tensor& opacities, const torch::Tensor& tile_offsets, const torch::Tensor& pair_gauss,
                   int64_t n_cams, int64_t width, int64_t height, torch::Tensor& out_color, torch::Tensor& out_t,
                   torch::Tensor& out_end) {
-  const int64_t C = colors.size(1);
+  using V = typename Lanes<T>::V;
+  using M = typename Lanes<T>::M;
+  using I = typename Lanes<T>::I;
+  const int64_t C = NC > 0 ? NC : colors.size(1);
   const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
   const int64_t n_tiles = n_cams * tiles_x * tiles_y;
   const T* m2 = means2d.data_ptr<T>();
@@ -126,59 +243,89 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
   T* oc = out_color.data_ptr<T>();
   T* ot = out_t.data_ptr<T>();
   int32_t* oe = out_end.data_ptr<int32_t>();
+  const Footprints<T> foot(cn, op, means2d.size(0));
 
 #pragma omp parallel num_threads(num_threads())
   {
     std::vector<Splat<T>> splats;
+    // per row of lanes: transmittance, still compositing (mask), one past the last splat, colour sums
+    V trans[kTile], acc[kTile][kMaxChannels];
+    M live[kTile], last[kTile];
+    bool row_live[kTile];
 #pragma omp for schedule(dynamic, 2)
     for (int64_t tile = 0; tile < n_tiles; ++tile) {
       const int64_t begin = off[tile], end = off[tile + 1];
       if (begin == end) continue;
-      const int64_t cam = tile / (tiles_x * tiles_y), local = tile % (tiles_x * tiles_y);
-      const int64_t x0 = (local % tiles_x) * kTile, y0 = (local / tiles_x) * kTile;
-      gather_tile(m2, cn, op, pg, begin, end, splats);
-      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
-        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
-          const T fx = T(px) + T(0.5), fy = T(py) + T(0.5);
-          T acc[kMaxChannels] = {T(0)};
-          T trans = T(1);
-          int64_t last = begin;
-          for (int64_t k = begin; k < end; ++k) {
-            const Splat<T>& s = splats[k - begin];
-            T dx, dy;
-            const T power = splat_power(s, fx, fy, dx, dy);
-            if (power > T(0) || power < s.log_min) continue;
-            const T alpha = std::min(Rules<T>::alpha_max, s.opacity * std::exp(power));
-            const T next_t = trans * (T(1) - alpha);
-            if (next_t < Rules<T>::transmittance_min) break;
-            const T w = alpha * trans;
-            const T* c = col + pg[k] * C;
-            for (int64_t ch = 0; ch < C; ++ch) acc[ch] += w * c[ch];
-            trans = next_t;
-            last = k + 1;
+      const TileOrigin o(tile, tiles_x, tiles_y, width, height);
+      gather_tile(m2, cn, op, foot, pg, begin, end, o.y0, o.last_y, splats);
+      V fx;
+      M inside;
+      for (int l = 0; l < kTile; ++l) {
+        fx[l] = T(o.x0 + l) + T(0.5);
+        inside[l] = l <= o.last_x ? -1 : 0;
+      }
+      int32_t rows_live = o.last_y + 1;
+      for (int r = 0; r < kTile; ++r) {
+        trans[r] = V{} + T(1);
+        last[r] = M{} + static_cast<I>(begin);
+        live[r] = inside;
+        row_live[r] = r < rows_live;
+        for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] = V{};
+      }
+      for (int64_t k = begin; k < end && rows_live > 0; ++k) {
+        const Splat<T>& s = splats[k - begin];
+        const T* c = col + static_cast<int64_t>(pg[k]) * C;
+        for (int32_t r = s.row_lo; r <= s.row_hi; ++r) {
+          if (!row_live[r]) continue;
+          const V dx = s.mx - fx, dy = V{} + (s.my - (T(o.y0 + r) + T(0.5)));
+          const V power = power_lanes(s, dx, dy);
+          const M hit = live[r] & (power <= T(0)) & (power >= s.log_min);
+          const V clipped = power > T(0) ? V{} : (power < s.log_min ? V{} + s.log_min : power);
+          const V raw = s.opacity * exp_lanes(clipped);
+          const V alpha = hit ? (raw < Rules<T>::alpha_max ? raw : V{} + Rules<T>::alpha_max) : V{};
+          const V next_t = trans[r] * (T(1) - alpha);
+          const M stop = next_t < Rules<T>::transmittance_min;  // only a hit can bring it below
+          const M use = hit & ~stop;
+          const V w = use ? alpha * trans[r] : V{};
+          for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] += w * c[ch];
+          trans[r] = use ? next_t : trans[r];
+          last[r] = use ? M{} + static_cast<I>(k + 1) : last[r];
+          if (any_lane(stop)) {
+            live[r] &= ~stop;
+            if (!any_lane(live[r])) {
+              row_live[r] = false;
+              --rows_live;
+            }
           }
-          const int64_t pix = (cam * height + py) * width + px;
-          for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[ch];
-          ot[pix] = trans;
-          oe[pix] = static_cast<int32_t>(last);
+        }
+      }
+      for (int32_t r = 0; r <= o.last_y; ++r) {
+        for (int32_t l = 0; l <= o.last_x; ++l) {
+          const int64_t pix = o.pixel(width, height, r, l);
+          for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[r][ch][l];
+          ot[pix] = trans[r][l];
+          oe[pix] = static_cast<int32_t>(last[r][l]);
         }
       }
     }
   }
 }
 
-template <typename T>
+template <typename T, int NC>
 torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
                             const torch::Tensor& opacities, const torch::Tensor& tile_offsets,
                             const torch::Tensor& pair_gauss, const torch::Tensor& final_t,
                             const torch::Tensor& pixel_end, const torch::Tensor& grad_color,
                             const torch::Tensor& grad_alpha, int64_t n_cams, int64_t width, int64_t height) {
-  const int64_t M = means2d.size(0), C = colors.size(1);
+  using V = typename Lanes<T>::V;
+  using M = typename Lanes<T>::M;
+  using I = typename Lanes<T>::I;
+  const int64_t M_entries = means2d.size(0), C = NC > 0 ? NC : colors.size(1);
   const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
   const int64_t n_tiles = n_cams * tiles_x * tiles_y;
   const int64_t stride = 6 + C;  // per-entry gradient record: mx, my, a, b, c, opacity, colours
   const int n_threads = num_threads();
-  auto buffers = torch::zeros({n_threads, M, stride}, means2d.options());
+  auto buffers = torch::zeros({n_threads, M_entries, stride}, means2d.options());
   const T* m2 = means2d.data_ptr<T>();
   const T* cn = conics.data_ptr<T>();
   const T* col = colors.data_ptr<T>();
@@ -190,63 +337,90 @@ torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& c
   const T* gc = grad_color.data_ptr<T>();
   const T* ga = grad_alpha.data_ptr<T>();
   T* buf = buffers.data_ptr<T>();
+  const Footprints<T> foot(cn, op, M_entries);
 
 #pragma omp parallel num_threads(n_threads)
   {
     std::vector<Splat<T>> splats;
-    std::vector<T> local;  // per-pair gradient records of the current tile
-    T* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * M * stride;
+    T* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * M_entries * stride;
+    // per row of lanes: transmittance in front of the current splat, final transmittance, d loss /
+    // d alpha_out, one past the last splat, colour gradient and the sum over later contributors of
+    // w_j * c_j; rec: the current splat's gradient record, per lane, summed over rows
+    V trans[kTile], t_final[kTile], g_alpha[kTile], grad[kTile][kMaxChannels];
+    M stop[kTile];
+    V behind[kTile][kMaxChannels], rec[6 + kMaxChannels];
+    int32_t row_end[kTile];
 #pragma omp for schedule(static, 2)  // fixed tile -> thread map: gradient sums are reproducible
     for (int64_t tile = 0; tile < n_tiles; ++tile) {
       const int64_t begin = off[tile], end = off[tile + 1];
       if (begin == end) continue;
-      const int64_t cam = tile / (tiles_x * tiles_y), loc = tile % (tiles_x * tiles_y);
-      const int64_t x0 = (loc % tiles_x) * kTile, y0 = (loc / tiles_x) * kTile;
-      gather_tile(m2, cn, op, pg, begin, end, splats);
-      local.assign((end - begin) * stride, T(0));
-      for (int64_t py = y0; py < std::min(y0 + kTile, height); ++py) {
-        for (int64_t px = x0; px < std::min(x0 + kTile, width); ++px) {
-          const int64_t pix = (cam * height + py) * width + px;
-          const T fx = T(px) + T(0.5), fy = T(py) + T(0.5);
-          const T t_final = ft[pix];
-          const T* g = gc + pix * C;
-          const T g_alpha_out = ga[pix];
-          T behind[kMaxChannels] = {T(0)};  // sum over later contributors of w_j * c_j
-          T trans = t_final;
-          for (int64_t k = pe[pix] - 1; k >= begin; --k) {
-            const Splat<T>& s = splats[k - begin];
-            T dx, dy;
-            const T power = splat_power(s, fx, fy, dx, dy);
-            if (power > T(0) || power < s.log_min) continue;
-            const T gauss = std::exp(power);
-            const T raw_alpha = s.opacity * gauss;
-            const T alpha = std::min(Rules<T>::alpha_max, raw_alpha);
-            const T inv = T(1) / (T(1) - alpha);
-            trans *= inv;  // transmittance in front of this Gaussian
-            const T w = alpha * trans;
-            const T* c = col + pg[k] * C;
-            T* rec = local.data() + (k - begin) * stride;
-            T d_alpha = g_alpha_out * t_final * inv;
-            for (int64_t ch = 0; ch < C; ++ch) {
-              rec[6 + ch] += w * g[ch];
-              d_alpha += g[ch] * (trans * c[ch] - behind[ch] * inv);
-              behind[ch] += w * c[ch];
-            }
-            if (raw_alpha >= Rules<T>::alpha_max) continue;  // clamped: alpha ignores the parameters
-            const T d_power = d_alpha * alpha;
-            rec[0] -= d_power * (s.a * dx + s.b * dy);
-            rec[1] -= d_power * (s.c * dy + s.b * dx);
-            rec[2] -= T(0.5) * d_power * dx * dx;
-            rec[3] -= d_power * dx * dy;
-            rec[4] -= T(0.5) * d_power * dy * dy;
-            rec[5] += d_alpha * gauss;
-          }
+      const TileOrigin o(tile, tiles_x, tiles_y, width, height);
+      gather_tile(m2, cn, op, foot, pg, begin, end, o.y0, o.last_y, splats);
+      V fx;
+      for (int l = 0; l < kTile; ++l) fx[l] = T(o.x0 + l) + T(0.5);
+      int64_t last = begin;
+      for (int32_t r = 0; r < kTile; ++r) {
+        trans[r] = t_final[r] = V{} + T(1);
+        g_alpha[r] = V{};
+        stop[r] = M{} + static_cast<I>(begin);
+        row_end[r] = static_cast<int32_t>(begin);
+        for (int64_t ch = 0; ch < C; ++ch) grad[r][ch] = behind[r][ch] = V{};
+        if (r > o.last_y) continue;
+        for (int32_t l = 0; l <= o.last_x; ++l) {
+          const int64_t pix = o.pixel(width, height, r, l);
+          trans[r][l] = t_final[r][l] = ft[pix];
+          g_alpha[r][l] = ga[pix];
+          stop[r][l] = pe[pix];
+          row_end[r] = std::max(row_end[r], pe[pix]);
+          for (int64_t ch = 0; ch < C; ++ch) grad[r][ch][l] = gc[pix * C + ch];
         }
+        last = std::max<int64_t>(last, row_end[r]);
       }
-      for (int64_t k = begin; k < end; ++k) {
+      for (int64_t k = last - 1; k >= begin; --k) {
+        const Splat<T>& s = splats[k - begin];
+        const T* c = col + static_cast<int64_t>(pg[k]) * C;
+        bool touched = false;
+        for (int32_t r = s.row_lo; r <= s.row_hi; ++r) {
+          if (k >= row_end[r]) continue;
+          const V dx = s.mx - fx, dy = V{} + (s.my - (T(o.y0 + r) + T(0.5)));
+          const V power = power_lanes(s, dx, dy);
+          const M hit = (M{} + static_cast<I>(k) < stop[r]) & (power <= T(0)) & (power >= s.log_min);
+          if (!any_lane(hit)) continue;
+          if (!touched) std::fill(rec, rec + stride, V{});
+          touched = true;
+          const V clipped = power > T(0) ? V{} : (power < s.log_min ? V{} + s.log_min : power);
+          const V gauss = exp_lanes(clipped);
+          const V raw = s.opacity * gauss;
+          const V alpha = hit ? (raw < Rules<T>::alpha_max ? raw : V{} + Rules<T>::alpha_max) : V{};
+          const V inv = T(1) / (T(1) - alpha);
+          const V t = trans[r] * inv;  // transmittance in front of this splat (unchanged when not hit)
+          trans[r] = t;
+          const V w = alpha * t;
+          V d_alpha = g_alpha[r] * t_final[r] * inv;
+          for (int64_t ch = 0; ch < C; ++ch) {
+            const V g = grad[r][ch];
+            rec[6 + ch] += w * g;
+            d_alpha += g * (t * c[ch] - behind[r][ch] * inv);
+            behind[r][ch] += w * c[ch];
+          }
+          // selects, not products with a mask: a lane that is not hit may hold huge offsets
+          const M on = hit & (raw < Rules<T>::alpha_max);  // clamped: alpha ignores the parameters
+          const V d_power = on ? d_alpha * alpha : V{};
+          const V ex = on ? dx : V{}, ey = on ? dy : V{};
+          rec[0] -= d_power * (s.a * ex + s.b * ey);
+          rec[1] -= d_power * (s.c * ey + s.b * ex);
+          rec[2] -= T(0.5) * d_power * ex * ex;
+          rec[3] -= d_power * ex * ey;
+          rec[4] -= T(0.5) * d_power * ey * ey;
+          rec[5] += on ? d_alpha * gauss : V{};
+        }
+        if (!touched) continue;
         T* dst = mine + static_cast<int64_t>(pg[k]) * stride;
-        const T* rec = local.data() + (k - begin) * stride;
-        for (int64_t j = 0; j < stride; ++j) dst[j] += rec[j];
+        for (int64_t j = 0; j < stride; ++j) {
+          T sum = T(0);
+          for (int l = 0; l < kTile; ++l) sum += rec[j][l];
+          dst[j] += sum;
+        }
       }
     }
   }
@@ -266,8 +440,10 @@ std::vector<torch::Tensor> forward(torch::Tensor means2d, torch::Tensor conics, 
   auto out_t = torch::ones({n_cams, height, width}, opts);
   auto out_end = torch::zeros({n_cams, height, width}, torch::dtype(torch::kInt32));
   AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_forward", [&] {
-    forward_impl<scalar_t>(means2d, conics, colors, opacities, tile_offsets, pair_gauss, n_cams, width, height,
-                           out_color, out_t, out_end);
+    dispatch_channels(colors.size(1), [&](auto channels) {
+      forward_impl<scalar_t, decltype(channels)::value>(means2d, conics, colors, opacities, tile_offsets, pair_gauss,
+                                                       n_cams, width, height, out_color, out_t, out_end);
+    });
   });
   return {out_color, out_t, out_end};
 }
@@ -283,8 +459,11 @@ std::vector<torch::Tensor> backward(torch::Tensor means2d, torch::Tensor conics,
   grad_alpha = grad_alpha.to(means2d.dtype()).contiguous();
   torch::Tensor total;
   AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_backward", [&] {
-    total = backward_impl<scalar_t>(means2d, conics, colors, opacities, tile_offsets, pair_gauss, final_t,
-                                    pixel_end, grad_color, grad_alpha, n_cams, width, height);
+    dispatch_channels(colors.size(1), [&](auto channels) {
+      total = backward_impl<scalar_t, decltype(channels)::value>(means2d, conics, colors, opacities, tile_offsets,
+                                                                pair_gauss, final_t, pixel_end, grad_color,
+                                                                grad_alpha, n_cams, width, height);
+    });
   });
   const int64_t M = means2d.size(0), C = colors.size(1);
   return {total.narrow(1, 0, 2).contiguous(), total.narrow(1, 2, 3).contiguous(), total.narrow(1, 6, C).contiguous(),
