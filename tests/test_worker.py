@@ -157,6 +157,18 @@ def test_cameras_that_see_nothing_are_an_input_error_naming_the_files(job, tmp_p
     assert not job.path("out.ply").exists() and not job.path("report.json").exists()
 
 
+def test_messages_use_the_callers_names_for_temporary_exports(job, tmp_path):
+    """Blender exports the object and its cameras to the job folder: messages name the object instead."""
+    save_cameras_json(job.path("cameras.json"), BLIND_CAMERAS["looking-away"])
+    job.start({**transfer_spec(tmp_path), "views": "cameras.json", "input_name": "object 'Donut'",
+               "views_name": "the scene's cameras"})
+    status = wait_for(job, lambda s: s.finished, timeout=60)
+    assert status.state == ERROR and job.process.returncode == EXIT_INPUT
+    assert status.error.startswith("object 'Donut': no Gaussian is visible in any of the 3 views of the scene's "
+                                   "cameras: all 600 Gaussians are behind the cameras")
+    assert str(job.folder) not in status.error
+
+
 def test_region_restyles_only_the_masked_gaussians(job, tmp_path):
     selected = np.arange(0, 600, 2)
     np.save(job.path("region.npy"), selected)

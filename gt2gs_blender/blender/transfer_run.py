@@ -75,6 +75,16 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
 
 
+def views_label(settings) -> str | None:
+    """What messages call the views when they come from the Blender scene (None: automatic views or a
+    cameras.json the user picked, which messages name by its path)."""
+    if settings.view_source == "SCENE_CAMERAS":
+        return "the scene's cameras"
+    if settings.view_source == "COLLECTION" and settings.camera_collection is not None:
+        return f"the cameras of collection {settings.camera_collection.name!r}"
+    return None
+
+
 def view_spec(context, obj, job: Job, overrides: dict[str, Any]) -> str | int | None:
     """The job's ``views``: a count of automatic views (or None: the preset's) or a cameras.json path."""
     settings = context.scene.gt2gs
@@ -212,6 +222,7 @@ class TransferRun:
                 "kind": kind, "input": "input.ply", "texture": texture_spec(context, job, overrides.get("texture_path")),
                 "views": view_spec(context, obj, job, overrides), "preset": preset, "config": config,
                 "output": "result.ply" if kind == "transfer" else "orientation.png", "report": "report.json",
+                "input_name": f"object {obj.name!r}", "views_name": views_label(settings),
             }
             if kind == "transfer" and settings.region_only:
                 np.save(job.path("region.npy"), selected_points(obj))

@@ -6,7 +6,11 @@ loads into Blender, a crash cannot take Blender down, Cancel can always stop it)
     {"kind": "transfer" | "preview", "input": "scene.ply", "texture": "texture.png" (or pixels.npy),
      "views": "cameras.json" | 8 | null, "preset": "fast", "config": {TransferConfig overrides},
      "region": "mask.npy" | null, "output": "out.ply" (preview: out.png), "report": "report.json",
-     "preview_dir": "previews", "cancel_file": "cancel", "preview_size": 256}
+     "preview_dir": "previews", "cancel_file": "cancel", "preview_size": 256,
+     "input_name": "object 'Donut'", "views_name": "the scene's cameras"}
+
+``input_name`` / ``views_name`` are what error messages call the input and the views when the files
+are a caller's temporary exports (default: the file paths).
 
 Events go to stdout as JSON lines (stray prints of libraries are sent to stderr instead):
 ``{"event": "progress", "stage", "step", "total", "fraction", "eta_s", "message", "preview"}`` (the
@@ -53,6 +57,8 @@ class JobSpec:
     preview_dir: Path | None = None
     cancel_file: Path | None = None
     preview_size: int = 256
+    input_name: str | None = None
+    views_name: str | None = None
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "JobSpec":
@@ -87,6 +93,7 @@ class JobSpec:
             region=resolve(data.get("region")), report=resolve(data.get("report")),
             preview_dir=resolve(data.get("preview_dir")), cancel_file=resolve(data.get("cancel_file")),
             preview_size=int(data.get("preview_size") or 256),
+            input_name=data.get("input_name") or None, views_name=data.get("views_name") or None,
         )
 
 
@@ -180,8 +187,8 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
     config = _config(spec)
     views = _views(spec)
     region = None if spec.region is None else load_region(spec.region)
-    require_visible(scene, views, config, spec.input, str(spec.views) if isinstance(spec.views, Path) else None,
-                    region)
+    views_name = spec.views_name or (str(spec.views) if isinstance(spec.views, Path) else None)
+    require_visible(scene, views, config, spec.input_name or spec.input, views_name, region)
     if spec.preview_dir is not None:
         spec.preview_dir.mkdir(parents=True, exist_ok=True)
     frames = 0
