@@ -64,6 +64,18 @@ def test_transfer_is_deterministic(cache):
     assert torch.equal(a.sh_dc, b.sh_dc)
 
 
+def test_stylised_sh_degree_trains_view_dependent_bands(cache):
+    """Degree 0 (default): rest bands dropped. Degree 2: zero-padded bands are trained, so the restyled
+    colour of a Gaussian changes with the direction it is seen from."""
+    scene = blob_scene()
+    flat = transfer(scene, stripes(), None, tiny(cache_dir=cache)).scene
+    shaded = transfer(scene, stripes(), None, tiny(cache_dir=cache, stylised_sh_degree=2)).scene
+    assert flat.sh_degree == 0 and shaded.sh_degree == 2
+    assert torch.isfinite(shaded.sh_rest).all() and shaded.sh_rest.abs().amax() > 1e-4
+    with pytest.raises(ValueError, match="stylised_sh_degree"):
+        tiny(stylised_sh_degree=4)
+
+
 def test_progress_is_monotone_with_previews(cache):
     seen = []
     transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache), progress=seen.append)

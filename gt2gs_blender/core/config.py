@@ -13,6 +13,8 @@ class TransferConfig:
     n_views: int = 16                # automatic views when none are given
     stylise_steps: int = 200         # optimisation steps of the stylisation stage
     lr: float = 0.02                 # Adam learning rate on the DC colour coefficients
+    stylised_sh_degree: int = 0      # SH degree of restyled colours: 0 = the same from every side (paper's code);
+                                     # 1-3 train view-dependent bands too (lr/20), as NNFM baselines' fields do
     lambda_style: float = 1.0        # NNFM / texture loss weight
     lambda_content: float = 0.005    # content feature MSE (paper: 0.005 LLFF, 0.0005 360 scenes)
     lambda_tv: float = 0.02          # image total variation (paper 0.02)
@@ -75,6 +77,8 @@ class TransferConfig:
         if not 0.0 < self.feature_scale <= 4.0 or not 0.0 <= self.min_new_coverage <= 1.0:
             raise ValueError(f"need 0 < feature_scale <= 4 and 0 <= min_new_coverage <= 1, got {self.feature_scale}, "
                              f"{self.min_new_coverage}")
+        if not 0 <= self.stylised_sh_degree <= 3:
+            raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         if self.device not in ("auto", "cpu", "cuda"):

@@ -93,7 +93,8 @@ class Styliser:
         self.views, self.order, self.bank, self.extractor, self.config = views, order, bank, extractor, config
         self.background = background
         self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
-        self.opt = GaussianAdam(scene, self._lrs(), trainable=("sh_dc",), frozen=frozen,
+        self.colors = ("sh_dc", "sh_rest") if config.stylised_sh_degree > 0 else ("sh_dc",)
+        self.opt = GaussianAdam(scene, self._lrs(), trainable=self.colors, frozen=frozen,
                                 attachments={COLOR_ATTACHMENT: scene.base_colors.detach()})
         self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
         self.stats = DensityStats(len(scene), "color", device=scene.device)
@@ -106,6 +107,7 @@ class Styliser:
     def _lrs(self) -> dict[str, float]:
         lrs = LearningRates().at(0, 1, self.extent)
         lrs["sh_dc"] = self.config.lr
+        lrs["sh_rest"] = self.config.lr / 20.0  # 3DGS's ratio of the rest bands' rate to the DC's
         return lrs
 
     @property
@@ -131,7 +133,7 @@ class Styliser:
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
-        self.opt.set_trainable(("sh_dc",))
+        self.opt.set_trainable(self.colors)
         out = render(self.scene, [view.camera], background=self.background, backend=cfg.backend, render_depth=False)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])

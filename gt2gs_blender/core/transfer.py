@@ -299,7 +299,8 @@ def transfer(
     bool mask (N,) or an index array of the Gaussians to restyle; the others come out bit-identical,
     first and in their original order, followed by the restyled ones (and any densified). The input
     scene is not modified. The restyled Gaussians are view-independent (no SH bands above 0, as in
-    the paper's code); without a region the whole result has SH degree 0. Raises ``Cancelled``
+    the paper's code; ``config.stylised_sh_degree`` > 0 keeps and trains view-dependent bands); without
+    a region the whole result has SH degree ``config.stylised_sh_degree``. Raises ``Cancelled``
     when ``cancel()`` returns True.
     """
     config = config or TransferConfig()
@@ -315,7 +316,7 @@ def transfer(
                           config.n_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     content, hidden = _content_and_hidden(original, cameras, background, config)
-    start = work = original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
+    start = work = _stylise_start(original, selected, config.stylised_sh_degree)
     if hidden is not None and selected is not None and not bool((selected & ~hidden).any()):
         hidden = None  # the whole region is hidden: restyle it as asked
     if hidden is not None:
@@ -476,6 +477,14 @@ def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.
     if not bool(mask.any()):
         raise GT2GSError("the region is empty: select at least one Gaussian to restyle")
     return mask.to(device)
+
+
+def _stylise_start(original: GaussianScene, selected: torch.Tensor | None, degree: int) -> GaussianScene:
+    """The scene stylisation starts from: at ``degree`` 0 the restyled Gaussians lose their SH rest bands
+    (view-independent texture); above it the bands are kept (zero-padded up to ``degree``) and trained."""
+    if degree == 0:
+        return original.with_sh_degree(0) if selected is None else _without_rest(original, selected)
+    return original.with_sh_degree(degree if selected is None else max(degree, original.sh_degree))
 
 
 def _without_rest(scene: GaussianScene, rows: torch.Tensor) -> GaussianScene:
