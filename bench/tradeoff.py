@@ -35,11 +35,12 @@ SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
 SCENE = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
-REFERENCE = ("balanced", {"skip_hidden": False})
+REFERENCE = ("balanced", {"skip_hidden": False, "plateau_window": 0, "match_channels": 0})
 VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "preview": ("preview", {}),
     "fast": ("fast", {}),
     "fast, no hidden skip": ("fast", {"skip_hidden": False}),
+    "fast, no plateau stop": ("fast", {"plateau_window": 0}),
     "fast, hidden <= 1 px": ("fast", {"hidden_threshold": 1.0}),
     "fast, 100 steps": ("fast", {"stylise_steps": 100, "correct_steps": 50}),
     "fast, 200 steps, 36 angles": ("fast", {"stylise_steps": 200, "correct_steps": 100, "n_angles": 36}),
@@ -110,7 +111,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(DEFAULT_VARIANTS))
     parser.add_argument("--reference", type=Path, default=OUT / "transfer_balanced_ref.json",
-                        help="a bench/transfer.py record of balanced with skip_hidden=false (run when missing)")
+                        help="a bench/transfer.py record of balanced with every skip off (run when missing)")
     parser.add_argument("--json", type=Path, default=OUT / "tradeoff.json")
     parser.add_argument("--png", type=Path, default=OUT / "tradeoff.png")
     args = parser.parse_args()

@@ -44,10 +44,10 @@ class TransferConfig:
     skip_sh: bool = True             # render the original only up to the highest SH band with a non-zero coefficient
     adaptive_angles: bool = False    # fewer bank angles for a texture with no strong local orientation (n_angles = most)
     dedup_threshold: float = 0.0     # drop bank rows with a twin above this cosine in their depth group (0 = off)
-    match_channels: int = 0          # match on this many PCA channels of the bank (0 = all)
+    match_channels: int = 64         # match on this many PCA channels of the bank (0 = all; targets stay full)
     drop_views: bool = False         # drop views that add less than min_new_coverage of unseen covered pixels
     min_new_coverage: float = 0.02
-    plateau_window: int = 0          # stop a phase when the mean loss of this many steps stops falling (0 = off)
+    plateau_window: int = 16         # stop a phase when the mean loss of this many steps stops falling (0 = off)
     plateau_tol: float = 0.01        # ... by less than this fraction of the window before
     feature_scale: float = 0.5       # renders are resized by this before VGG (paper 0.5)
     bank_cache: bool = True          # keep texture banks on disk across runs (cache_dir or $GT2GS_CACHE_DIR)
@@ -105,6 +105,8 @@ PAPER_SCHEDULE: dict[str, Any] = dict(
     lambda_style=2.0, lambda_tv=0.02, lambda_prior=100.0,
     lambda_depth=0.8, lambda_frequency=0.8, lambda_distortion=0.25,
     lambda_scale=0.1, scale_ratio_limit=1.0,
+    plateau_window=0,        # the paper's step counts, run in full
+    match_channels=0,        # and its matching on every channel
 )
 """The paper's schedule and weights (paper §4 and appendix, the authors' code for lambda_p and the
 scale regulariser); its 400 + 400 colour-transfer fitting steps are exact SH transforms here."""
