@@ -54,6 +54,10 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
                    help="no densification while stylising")
     p.add_argument("--no-skip-hidden", dest="skip_hidden", action="store_false", default=None,
                    help="optimise every Gaussian, also those no view sees (slower, same result for what is seen)")
+    p.add_argument("--no-plateau-stop", dest="plateau_window", action="store_const", const=0, default=None,
+                   help="run every step of every phase, also after the loss has stopped falling")
+    p.add_argument("--full-matching", dest="match_channels", action="store_const", const=0, default=None,
+                   help="match texture features on all channels, not their 64 principal components")
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
 
 
@@ -73,7 +77,8 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
         weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
-        gpb=args.gpb, densify=args.densify, skip_hidden=args.skip_hidden, **extra,
+        gpb=args.gpb, densify=args.densify, skip_hidden=args.skip_hidden, plateau_window=args.plateau_window,
+        match_channels=args.match_channels, **extra,
     )
 
 
