@@ -294,14 +294,17 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     out = tmp_path / "out.ply"
     code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
                        *DEMO_FAST, "--region", str(region), "--angle", "30", "--no-gt2", "--no-afcm", "--no-gpb",
-                       "--no-densify", "--no-skip-hidden", "--report", str(tmp_path / "r.json"))
+                       "--no-densify", "--no-skip-hidden", "--no-mixed-precision", "--threads", "1",
+                       "--report", str(tmp_path / "r.json"))
     assert code == 0, err
     before, after = read_ply(small_ply), read_ply(out)
     outside = np.setdiff1d(np.arange(1200), np.arange(0, 1200, 4))
     assert torch.equal(after.means[:len(outside)], before.means[outside])
     assert torch.equal(after.sh_dc[:len(outside)], before.sh_dc[outside])
     config = json.loads((tmp_path / "r.json").read_text())["config"]
-    assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden"))
+    assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden",
+                                                                   "mixed_precision"))
+    assert config["threads"] == 1
 
 
 def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):

@@ -136,3 +136,15 @@ def test_fast_preset_on_the_shared_donut(shared, tmp_path):
     assert metrics["texture_match"] <= 0.7 * metrics["texture_match_start"]
     assert metrics["ssim"] >= 0.3
     assert metrics["lt_lpips"] is not None and np.isfinite(metrics["lt_rmse"])
+
+
+def test_threads_cap_the_run_and_are_restored(cache):
+    """``threads`` sets torch's (and the C++ rasterizer's) thread count while the run works, then puts it back."""
+    before = torch.get_num_threads()
+    seen = []
+    transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, threads=1),
+             progress=lambda p: seen.append(torch.get_num_threads()))
+    assert seen and set(seen) == {1}
+    assert torch.get_num_threads() == before
+    with pytest.raises(ValueError, match="threads"):
+        tiny(threads=-1)

@@ -65,6 +65,7 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
         "angle": float(overrides.get("angle", settings.angle)), "lambda_content": settings.lambda_content,
         "seed": settings.seed, "color_transfer": settings.color_transfer, "depth_groups": settings.depth_groups,
         "device": device.lower(), "weights_path": addon.weights_path(context),
+        "threads": prefs.threads if prefs and prefs.threads > 0 else None,
     }
     for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles")):
         if getattr(settings, prop) > 0:

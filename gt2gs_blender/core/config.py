@@ -50,12 +50,14 @@ class TransferConfig:
     plateau_window: int = 16         # stop a phase when the mean loss of this many steps stops falling (0 = off)
     plateau_tol: float = 0.01        # ... by less than this fraction of the window before
     feature_scale: float = 0.5       # renders are resized by this before VGG (paper 0.5)
+    mixed_precision: bool = True     # VGG convolutions in float16 on a CUDA GPU (float32 on the CPU)
     bank_cache: bool = True          # keep texture banks on disk across runs (cache_dir or $GT2GS_CACHE_DIR)
     reuse_content: bool = True       # reuse the last run's content renders and hidden set (same scene + views)
     background: tuple[float, float, float] = (1.0, 1.0, 1.0)
     features: str = "auto"           # feature network preference (see features.load_feature_extractor)
     weights_path: str | None = None  # explicit weights file or folder
     device: str = "auto"             # auto | cpu | cuda
+    threads: int = 0                 # CPU threads for torch and the C++ rasterizer (0 = one per physical core)
     backend: str = "auto"            # rasterizer backend
     seed: int = 0
     preview_every: int = 10          # steps between preview frames sent to the progress callback
@@ -79,6 +81,8 @@ class TransferConfig:
                              f"{self.min_new_coverage}")
         if not 0 <= self.stylised_sh_degree <= 3:
             raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
+        if self.threads < 0:
+            raise ValueError(f"threads must be >= 0 (0 = one per physical core), got {self.threads}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         if self.device not in ("auto", "cpu", "cuda"):

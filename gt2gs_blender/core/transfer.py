@@ -8,10 +8,11 @@ frames; a cancel callable is polled between steps and raises ``Cancelled``.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from . import color_transfer
 from .cameras import Camera, auto_views
 from .config import TransferConfig
 from .errors import GT2GSError
-from .features import FeatureExtractor, load_feature_extractor
+from .features import FeatureExtractor, load_feature_extractor, mixed_precision_dtype
 from .gt2 import view_order
 from .rasterizer import render
 from .scene import GaussianScene, concat
@@ -301,10 +302,30 @@ def transfer(
     scene is not modified. The restyled Gaussians are view-independent (no SH bands above 0, as in
     the paper's code; ``config.stylised_sh_degree`` > 0 keeps and trains view-dependent bands); without
     a region the whole result has SH degree ``config.stylised_sh_degree``. Raises ``Cancelled``
-    when ``cancel()`` returns True.
+    when ``cancel()`` returns True. ``config.threads`` > 0 caps the CPU threads for the run.
     """
     config = config or TransferConfig()
-    tracker = _Tracker(progress, cancel)
+    with cpu_threads(config.threads):
+        return _transfer(scene, texture, views, config, region, _Tracker(progress, cancel))
+
+
+@contextlib.contextmanager
+def cpu_threads(count: int) -> Iterator[None]:
+    """torch's (and so the C++ rasterizer's) intra-op thread count set to ``count`` for the block,
+    then restored; 0 leaves torch's default (one per physical core)."""
+    before = torch.get_num_threads()
+    if count > 0:
+        torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        if count > 0:
+            torch.set_num_threads(before)
+
+
+def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, views: Sequence[Camera] | int | None,
+              config: TransferConfig, region: torch.Tensor | np.ndarray | None, tracker: "_Tracker") -> TransferResult:
+    """The body of :func:`transfer`."""
     torch.manual_seed(config.seed)
     device = resolve_device(config.device)
 
@@ -324,7 +345,8 @@ def transfer(
     region = selected if selected is None or hidden is None else selected[~hidden]
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
-    extractor = load_feature_extractor(config.features, config.weights_path, device, scale=config.feature_scale)
+    extractor = load_feature_extractor(config.features, config.weights_path, device, scale=config.feature_scale,
+                                       autocast=mixed_precision_dtype(device, config.mixed_precision))
     dropped = redundant_views(cameras, content.depths, content.alphas, view_order(cameras), config.min_new_coverage) \
         if config.drop_views and len(cameras) > 2 else []
     used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content

@@ -58,6 +58,10 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
                    help="run every step of every phase, also after the loss has stopped falling")
     p.add_argument("--full-matching", dest="match_channels", action="store_const", const=0, default=None,
                    help="match texture features on all channels, not their 64 principal components")
+    p.add_argument("--no-mixed-precision", dest="mixed_precision", action="store_false", default=None,
+                   help="run VGG in float32 on a CUDA GPU too (default there: float16; the CPU always uses float32)")
+    p.add_argument("--threads", type=int, metavar="N",
+                   help="CPU threads for the run (default: one per physical core)")
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
 
 
@@ -78,7 +82,7 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
         gpb=args.gpb, densify=args.densify, skip_hidden=args.skip_hidden, plateau_window=args.plateau_window,
-        match_channels=args.match_channels, **extra,
+        match_channels=args.match_channels, mixed_precision=args.mixed_precision, threads=args.threads, **extra,
     )
 
 

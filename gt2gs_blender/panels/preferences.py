@@ -1,8 +1,8 @@
-"""The extension's preferences: dependency status and install, weights folder, default device."""
+"""The extension's preferences: dependency status and install, weights folder, default device, CPU threads."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, StringProperty
+from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender import addon
 from ..core import deps
@@ -34,6 +34,10 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
     device: EnumProperty(
         name="Default Device", default="AUTO",
         items=(("AUTO", "Auto", "CUDA when available, else CPU"), ("CPU", "CPU", ""), ("CUDA", "CUDA", "")))
+    threads: IntProperty(
+        name="CPU Threads", default=0, min=0, soft_max=64,
+        description="Threads the transfer worker uses on the CPU; 0: one per physical core. "
+                    "Fewer keeps Blender more responsive while a transfer runs")
 
     def draw(self, context):
         layout = self.layout
@@ -53,6 +57,7 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
             box.label(text="Allow Online Access (Preferences ▸ System) to download packages", icon="INFO")
         layout.prop(self, "weights_dir")
         layout.prop(self, "device")
+        layout.prop(self, "threads")
 
 
 classes = (GT2GS_AP_preferences,)

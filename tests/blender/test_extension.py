@@ -84,7 +84,13 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
         report["operators"] = [hasattr(bpy.types, c) for c in
                                ("GT2GS_OT_import_ply", "GT2GS_OT_export_ply", "GT2GS_FH_ply", "VIEW3D_PT_gt2gs_splat",
                                 "GT2GS_OT_transfer_texture", "GT2GS_OT_preview_orientation", "VIEW3D_PT_gt2gs_transfer")]
-        report["preferences"] = bpy.context.preferences.addons[module].preferences.device
+        prefs = bpy.context.preferences.addons[module].preferences
+        report["preferences"] = [prefs.device, prefs.threads]
+        prefs.threads = 3  # the worker's CPU threads reach the job's config
+        run = sys.modules[module + ".blender.transfer_run"]
+        report["job_threads"] = run.config_overrides(bpy.context, {{}})[1].get("threads")
+        prefs.threads = 0
+        report["job_threads_default"] = run.config_overrides(bpy.context, {{}})[1].get("threads", "unset")
         donut = {str(DONUT)!r}
         if {DONUT.is_file()!r}:
             bpy.ops.gt2gs.import_ply(filepath=donut)
@@ -113,7 +119,8 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
 
     assert report["enabled"]
     assert Path(report["loaded_from"]).resolve() == (repo / "gt2gs_blender" / "__init__.py").resolve()
-    assert report["operators"] == [True] * 7 and report["preferences"] == "AUTO"
+    assert report["operators"] == [True] * 7 and report["preferences"] == ["AUTO", 0]
+    assert report["job_threads"] == 3 and report["job_threads_default"] == "unset"
     if DONUT.is_file():
         assert report["imported"] == ["POINTCLOUD", DONUT_COUNT]
         assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.ply"]

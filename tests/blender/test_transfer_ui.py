@@ -275,7 +275,7 @@ def test_panel_settings_and_keywords_become_the_job_config(fresh):
     settings = fresh.context.scene.gt2gs
     preset, config = transfer_run.config_overrides(fresh.context, {})
     assert preset == "fast" and config["device"] == "auto" and config["angle"] == 0.0
-    assert not {"stylise_steps", "resolution", "n_angles", "gt2", "gpb", "weights_path"} & set(config)
+    assert not {"stylise_steps", "resolution", "n_angles", "gt2", "gpb", "weights_path", "threads"} & set(config)
     settings.steps, settings.gpb, settings.device, settings.angle = 12, False, "CPU", 15.0
     preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
     assert preset == "preview" and config["angle"] == -30.0 and config["stylise_steps"] == 12
