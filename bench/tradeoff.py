@@ -1,10 +1,12 @@
 """Wall time against quality error over presets and skips on the shared donut (the Pareto picture).
 
-``python bench/tradeoff.py [--variants fast preview ...] [--reference bench/out/transfer_balanced_ref.json]``
-runs each variant (a preset plus TransferConfig overrides) on the donut with the herringbone-wood
-photo, one after the other in this process, and compares its quality with the reference run, the
-``balanced`` preset with every skip off (its record is reused from ``--reference`` when that file
-exists when the variants are done, else it runs then: about 15 min on 2 cores) and is plotted too. Quality error = how far texture match and
+``python bench/tradeoff.py [--variants fast preview ...] [--reference-preset balanced|paper-360|...]
+[--reference FILE.json]`` runs each variant (a preset plus TransferConfig overrides) on the donut with
+the herringbone-wood photo, one after the other in this process, and compares its quality with the
+reference run, ``--reference-preset`` with every skip off (default ``balanced``, about 15 min on 2
+cores; ``paper-360``, the paper's schedule, is the reference to take on a GPU, hours on a CPU); its
+record is reused from ``--reference`` when that file exists when the variants are done, else it runs
+then and is written there, and it is plotted too. Quality error = how far texture match and
 SSIM fall short of the reference, in percent (negative = better than the reference). Prints a
 table, writes bench/out/tradeoff.json and bench/out/tradeoff.png (time vs error, Pareto front).
 """
@@ -27,7 +29,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from gt2gs_blender.core.config import preset
+from gt2gs_blender.core.config import PRESETS, preset
 from gt2gs_blender.core.ply import read_ply
 from gt2gs_blender.core.transfer import transfer
 
@@ -35,7 +37,7 @@ SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
 SCENE = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
-REFERENCE = ("balanced", {"skip_hidden": False, "plateau_window": 0, "match_channels": 0})
+NO_SKIPS: dict[str, Any] = {"skip_hidden": False, "plateau_window": 0, "match_channels": 0}
 VARIANTS: dict[str, tuple[str, dict[str, Any]]] = {
     "preview": ("preview", {}),
     "fast": ("fast", {}),
@@ -84,7 +86,7 @@ def pareto(points: list[tuple[float, float]]) -> list[int]:
     return front
 
 
-def plot(records: list[dict[str, Any]], path: Path) -> None:
+def plot(records: list[dict[str, Any]], path: Path, reference: str) -> None:
     """Wall time (log) against quality error, variants labelled, Pareto front drawn, 10 % line."""
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     points = [(r["seconds"], r["error_pct"]) for r in records]
@@ -94,10 +96,10 @@ def plot(records: list[dict[str, Any]], path: Path) -> None:
     for i, (r, (x, y)) in enumerate(zip(records, points)):
         ax.scatter([x], [y], s=28, zorder=2, color="C3" if r["name"] == "fast" else "C0")
         ax.annotate(r["name"], (x, y), textcoords="offset points", xytext=(-20, 8 + 12 * (i % 3)), fontsize=7)
-    ax.axhline(10.0, color="C2", linestyle=":", linewidth=1, label="10 % of balanced")
+    ax.axhline(10.0, color="C2", linestyle=":", linewidth=1, label=f"10 % of {reference}")
     ax.set_xscale("log")
     ax.set_xlabel("wall time, end to end (s, 2 shared CPU cores)")
-    ax.set_ylabel("quality shortfall vs balanced (%)\nmax of texture match, SSIM")
+    ax.set_ylabel(f"quality shortfall vs {reference} (%)\nmax of texture match, SSIM")
     ax.set_title("GT²-GS on the donut (45.6k Gaussians), herringbone wood", fontsize=9)
     ax.set_ylim(-5, max(y for _, y in points) + 15)
     ax.legend(fontsize=7, loc="upper right")
@@ -110,11 +112,14 @@ def plot(records: list[dict[str, Any]], path: Path) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(DEFAULT_VARIANTS))
-    parser.add_argument("--reference", type=Path, default=OUT / "transfer_balanced_ref.json",
-                        help="a bench/transfer.py record of balanced with every skip off (run when missing)")
+    parser.add_argument("--reference-preset", choices=tuple(PRESETS), default="balanced",
+                        help="the quality reference, run with every skip off (default: balanced)")
+    parser.add_argument("--reference", type=Path,
+                        help="its record (default bench/out/transfer_<preset>_ref.json; run when missing)")
     parser.add_argument("--json", type=Path, default=OUT / "tradeoff.json")
     parser.add_argument("--png", type=Path, default=OUT / "tradeoff.png")
     args = parser.parse_args()
+    args.reference = args.reference or OUT / f"transfer_{args.reference_preset}_ref.json"
     OUT.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as cache:
         records = []
@@ -125,9 +130,9 @@ def main() -> None:
         if args.reference.is_file():
             reference = json.loads(args.reference.read_text())
         else:
-            reference = run(*REFERENCE, cache)
+            reference = run(args.reference_preset, NO_SKIPS, cache)
             args.reference.write_text(json.dumps(reference, indent=1))
-    records.append({"name": "balanced, no skips (reference)", **reference})
+    records.append({"name": f"{args.reference_preset}, no skips (reference)", **reference})
     print(f"{'variant':<32} {'s':>7} {'load':>5} " + " ".join(f"{m:>13}" for m in METRICS)
           + f" {'tm short %':>10} {'ssim short %':>12} {'hidden':>7}")
     for record in records:
@@ -138,7 +143,7 @@ def main() -> None:
               f"{record['texture_match_pct']:>10.1f} {record['ssim_pct']:>12.1f} "
               f"{(record.get('skips') or {}).get('hidden')!s:>7}")
     args.json.write_text(json.dumps({"reference": reference, "records": records}, indent=1))
-    plot(records, args.png)
+    plot(records, args.png, args.reference_preset)
     print(f"records: {args.json}\nplot: {args.png}")
 
 
