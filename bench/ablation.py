@@ -3,6 +3,8 @@
 ``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D]`` prints a table of SSIM,
 short/long-range RMSE and LPIPS, texture match, time and Gaussian count, writes
 bench/out/ablation.json and a PNG strip per scene (texture, original, then each variant, 3 views).
+Every variant runs every step of the preset's schedule (no loss-plateau stop), so the budgets are
+equal: a variant without the GPB stylises in one phase, whose plateau comes at another step count.
 The donut uses 16 automatic orbit views; the fern is the shared LLFF capture fitted with the fit
 engine (``bench/fit_fern.py`` output, fitted here first when missing) seen from its own cameras.
 ``--sh-degree D`` > 0 runs every variant with view-dependent restyled colours (stylised_sh_degree):
@@ -65,7 +67,7 @@ def load_scene(name: str, fit_iterations: int) -> tuple[GaussianScene, list[Came
 def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] | None, overrides: dict,
                 args: argparse.Namespace, background: tuple[float, float, float]) -> tuple[dict, GaussianScene]:
     config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"),
-                    background=background, stylised_sh_degree=args.sh_degree, **overrides)
+                    background=background, stylised_sh_degree=args.sh_degree, plateau_window=0, **overrides)
     start = time.perf_counter()
     result = transfer(scene, texture, views, config)
     row = {k: result.report["metrics"][k] for k in METRICS}
