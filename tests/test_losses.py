@@ -8,6 +8,7 @@ import torch
 
 from gt2gs_blender.core.gt2 import match_with_prior
 from gt2gs_blender.core.losses import (
+    anisotropy,
     content_loss,
     cosine_distance,
     nearest_features,
@@ -111,3 +112,13 @@ def test_scale_regulariser_penalises_the_largest_to_second_ratio():
     value.backward()
     assert torch.isfinite(log_scales.grad).all() and log_scales.grad[1].abs().max() < 1e-12
     assert float(scale_regulariser(log_scales.detach(), threshold=2.5)) == pytest.approx(0.5 / 3)
+
+
+def test_scale_regulariser_takes_a_threshold_per_gaussian():
+    """Ratios 2, 1 and 3 against thresholds 2.5, 1 and 2: only the third exceeds its own, by 1."""
+    log_scales = torch.log(torch.tensor([[0.5, 2.0, 1.0], [1.0, 1.0, 1.0], [3.0, 0.1, 1.0]])).requires_grad_()
+    assert torch.allclose(anisotropy(log_scales.detach()), torch.tensor([2.0, 1.0, 3.0]))
+    value = scale_regulariser(log_scales, torch.tensor([2.5, 1.0, 2.0]))
+    assert float(value.detach()) == pytest.approx(1.0 / 3)
+    value.backward()
+    assert log_scales.grad[:2].abs().max() == 0 and log_scales.grad[2].abs().max() > 0

@@ -11,6 +11,7 @@ import torch
 from gt2gs_blender.core.cameras import Camera, auto_views
 from gt2gs_blender.core.config import TransferConfig
 from gt2gs_blender.core.features import VGG19_NORM_RELU3, FeatureExtractor
+from gt2gs_blender.core.losses import anisotropy
 from gt2gs_blender.core.rasterizer import render
 from gt2gs_blender.core.scene import GaussianScene
 from gt2gs_blender.core.stylise import Styliser
@@ -137,3 +138,33 @@ def test_orientation_control_turns_the_texture(shared, tmp_path):
         angles.append(dominant_orientation(image[10:-10, 10:-10]))
     gap = abs(angles[0] - angles[1]) % 180.0
     assert abs(min(gap, 180.0 - gap) - 90.0) <= 15.0, angles
+
+
+@pytest.mark.parametrize("from_start", [True, False])
+def test_correction_keeps_a_fitted_scenes_thin_gaussians_unless_told_otherwise(from_start):
+    """GPB alone on a scene its content images show exactly, half of it needles of ratio 30: with
+    ``scale_ratio_from_start`` the regulariser tolerates each Gaussian's own shape, so the scales stay
+    where the fit put them (up to the reconstruction loss's own noise); with the authors' fixed limit
+    it squashes the needles, bending the geometry."""
+    original = blob_scene(600, seed=3).with_sh_degree(0)
+    log_scales = original.log_scales.clone()
+    log_scales[::2, 0] = log_scales[::2, 1] + math.log(30.0)
+    original = replace(original, log_scales=log_scales)
+    cameras = auto_views(original, 4, width=40, height=40)
+    config = TransferConfig(stylise_steps=0, correct_steps=40, rounds=1, gpb=True, densify=False, n_scales=1,
+                            lambda_scale=0.1, scale_ratio_limit=10.0, scale_ratio_from_start=from_start)
+    background = torch.ones(3)
+    content = render_views(original, cameras, background, "auto")
+    extractor = random_extractor()
+    targets = view_targets(content, original, extractor, config, "auto")
+    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
+                              texture_height=64)
+    styliser = Styliser(original, targets, list(range(len(cameras))), bank, extractor, config, background)
+    for _ in range(config.correct_steps):
+        styliser.correct_step()
+    ratios = anisotropy(styliser.scene.log_scales.detach())[::2]
+    drift = float((styliser.scene.log_scales.detach() - original.log_scales).abs().mean())
+    if from_start:  # measured: ratios >= 27.8, mean |d log-scale| 0.017
+        assert float(ratios.min()) > 26.0 and drift < 0.03
+    else:  # measured: ratios down to 20.4, mean |d log-scale| 0.086
+        assert float(ratios.min()) < 23.0 and float(ratios.mean()) < 26.0 and drift > 0.05

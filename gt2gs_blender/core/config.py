@@ -35,6 +35,8 @@ class TransferConfig:
     correct_steps: int = 100         # GPB correction steps in all (geometry vs content images)
     lambda_scale: float = 0.1        # scale regulariser weight in the correction phases (paper 0.1)
     scale_ratio_limit: float = 10.0  # largest/second scale ratio tolerated before it is penalised (authors: 1)
+    scale_ratio_from_start: bool = True  # ... or each Gaussian's own starting ratio if larger: the fit's needles
+                                     # are geometry to preserve, only stylisation's new ones are penalised
     densify: bool = True             # clone/split by the DC-colour gradient in the first half of the rounds
     densify_every: int = 25          # stylise steps between densification events
     densify_grad_threshold: float = 2e-4  # mean |dL/d f_dc| that makes a Gaussian grow
@@ -108,7 +110,7 @@ PAPER_SCHEDULE: dict[str, Any] = dict(
     n_scales=4, n_angles=360, texture_height=256,
     lambda_style=2.0, lambda_tv=0.02, lambda_prior=100.0,
     lambda_depth=0.8, lambda_frequency=0.8, lambda_distortion=0.25,
-    lambda_scale=0.1, scale_ratio_limit=1.0,
+    lambda_scale=0.1, scale_ratio_limit=1.0, scale_ratio_from_start=False,
     plateau_window=0,        # the paper's step counts, run in full
     match_channels=0,        # and its matching on every channel
 )

@@ -63,13 +63,18 @@ def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:
     return 0.5 * (dy.square().mean() + dx.square().mean())
 
 
-def scale_regulariser(log_scales: torch.Tensor, threshold: float = 1.0) -> torch.Tensor:
+def anisotropy(log_scales: torch.Tensor) -> torch.Tensor:
+    """Per Gaussian, largest / second-largest scale (>= 1), from the log-scales (stable)."""
+    top2 = torch.topk(log_scales, k=2, dim=-1).values
+    return torch.exp(top2[..., 0] - top2[..., 1])
+
+
+def scale_regulariser(log_scales: torch.Tensor, threshold: float | torch.Tensor = 1.0) -> torch.Tensor:
     """Mean over Gaussians of ``relu(largest / second-largest scale - threshold)``.
 
     The authors' code penalises the plain ratio (mean of largest/second, weight 0.1) to keep
     Gaussians from turning into needles that show as streaks; the default ``threshold`` 1 gives
     exactly that gradient (the value is shifted by 1, so an isotropic scene scores 0). A larger
-    threshold tolerates elongation up to that ratio. Computed from the log-scales, so it is stable.
+    threshold tolerates elongation up to that ratio; a tensor (N,) gives each Gaussian its own.
     """
-    top2 = torch.topk(log_scales, k=2, dim=-1).values
-    return F.relu(torch.exp(top2[..., 0] - top2[..., 1]) - threshold).mean()
+    return F.relu(anisotropy(log_scales) - threshold).mean()

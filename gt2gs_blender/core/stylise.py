@@ -31,7 +31,7 @@ from .densify import DensifyConfig, DensityStats, densify_and_prune
 from .features import FeatureExtractor
 from .fit import camera_extent, reconstruction_loss
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
-from .losses import content_loss, cosine_distance, scale_regulariser, tv_loss
+from .losses import anisotropy, content_loss, cosine_distance, scale_regulariser, tv_loss
 from .optim import GaussianAdam, LearningRates
 from .rasterizer import render
 from .scene import GaussianScene
@@ -40,6 +40,8 @@ from .texture_bank import TextureBank
 GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
 """The tensors the correction phases train."""
 COLOR_ATTACHMENT = "c_g"
+RATIO_ATTACHMENT = "ratio_limit"
+"""Per Gaussian, the scale ratio the correction phases tolerate (children inherit their parent's)."""
 
 
 @dataclass
@@ -95,7 +97,8 @@ class Styliser:
         self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
         self.colors = ("sh_dc", "sh_rest") if config.stylised_sh_degree > 0 else ("sh_dc",)
         self.opt = GaussianAdam(scene, self._lrs(), trainable=self.colors, frozen=frozen,
-                                attachments={COLOR_ATTACHMENT: scene.base_colors.detach()})
+                                attachments={COLOR_ATTACHMENT: scene.base_colors.detach(),
+                                             RATIO_ATTACHMENT: self._ratio_limits(scene)})
         self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
         self.stats = DensityStats(len(scene), "color", device=scene.device)
         self.max_gaussians = int(len(scene) * config.densify_max_growth)
@@ -103,6 +106,15 @@ class Styliser:
         self.cursor = 0
         self.generator = torch.Generator().manual_seed(config.seed)
         self.report = StyliseStats()
+
+    def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
+        """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
+        when larger and ``scale_ratio_from_start`` (a fitted scene's thin Gaussians are its geometry)."""
+        limit = torch.full((len(scene),), float(self.config.scale_ratio_limit), dtype=scene.dtype,
+                           device=scene.device)
+        if not self.config.scale_ratio_from_start:
+            return limit
+        return torch.maximum(limit, anisotropy(scene.log_scales.detach()))
 
     def _lrs(self) -> dict[str, float]:
         lrs = LearningRates().at(0, 1, self.extent)
@@ -194,7 +206,7 @@ class Styliser:
         out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
                      render_depth=False)
         loss = reconstruction_loss(out.colors[0], view.content_image) + \
-            cfg.lambda_scale * scale_regulariser(self.scene.log_scales, cfg.scale_ratio_limit)
+            cfg.lambda_scale * scale_regulariser(self.scene.log_scales, self.opt.attachments[RATIO_ATTACHMENT])
         loss.backward()
         self._step(loss)
         self.report.correct_steps += 1
