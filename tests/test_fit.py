@@ -235,3 +235,18 @@ def test_fit_command_writes_the_inria_layout_and_a_report(shared, tmp_path, caps
     scene = read_ply(out / "point_cloud.ply")
     assert len(scene) == values["n_gaussians"] == len(read_ply(out / "point_cloud" / "iteration_20" / "point_cloud.ply"))
     assert len(load_cameras_json(out / "cameras.json")) == 20
+
+
+def test_reconstruction_tolerance_passes_no_gradient_below_it_and_the_same_direction_above():
+    """Residuals within the tolerance give exactly zero gradient (Adam would turn any gradient into a
+    full step); large residuals give nearly the plain loss's gradient."""
+    generator = torch.Generator().manual_seed(0)
+    target = torch.rand(24, 24, 3, generator=generator)
+    tiny = (target + 1e-4 * torch.randn(24, 24, 3, generator=generator)).requires_grad_()
+    reconstruction_loss(tiny, target, tolerance=0.5 / 255).backward()
+    assert tiny.grad.abs().max() == 0
+    reconstruction_loss(tiny, target).backward()
+    assert tiny.grad.abs().max() > 0
+    far = (target + 0.2 * torch.randn(24, 24, 3, generator=generator)).requires_grad_()
+    grads = [torch.autograd.grad(reconstruction_loss(far, target, tolerance=t), far)[0].flatten() for t in (0.0, 0.5 / 255)]
+    assert torch.nn.functional.cosine_similarity(grads[0], grads[1], dim=0) > 0.99

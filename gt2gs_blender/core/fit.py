@@ -21,6 +21,7 @@ from typing import Callable, Iterable, Sequence, TextIO
 import cv2
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from .atomic import atomic_write
 from .cameras import Camera, load_llff, save_cameras_json
@@ -31,7 +32,7 @@ from .optim import PARAM_NAMES, GaussianAdam, LearningRates
 from .ply import write_ply
 from .rasterizer import RenderOutput, render
 from .scene import GaussianScene
-from .ssim import ssim
+from .ssim import WINDOW, ssim, ssim_map
 
 LLFF_HOLDOUT = 8
 """LLFF protocol: views 0, 8, 16, ... are the test set."""
@@ -78,10 +79,22 @@ class FitProgress:
     elapsed: float
 
 
-def reconstruction_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2) -> torch.Tensor:
-    """3DGS's (1 - lambda) L1 + lambda (1 - SSIM) of (H, W, 3) or (B, H, W, 3) images."""
-    l1 = (rendered - target).abs().mean()
-    return (1.0 - lambda_dssim) * l1 + lambda_dssim * (1.0 - ssim(rendered, target).mean())
+def reconstruction_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2,
+                        tolerance: float = 0.0) -> torch.Tensor:
+    """3DGS's (1 - lambda) L1 + lambda (1 - SSIM) of (H, W, 3) or (B, H, W, 3) images.
+
+    ``tolerance`` > 0 treats smaller residuals as none: the L1 term counts only the excess, and SSIM
+    windows with no residual above it pass no gradient. Adam takes full-size steps on however small
+    a gradient, so without this a scene that already fits its targets random-walks (the GPB's case).
+    """
+    residual = (rendered - target).abs()
+    if tolerance <= 0.0:
+        return (1.0 - lambda_dssim) * residual.mean() + lambda_dssim * (1.0 - ssim(rendered, target).mean())
+    windows = ssim_map(rendered, target)
+    batched = residual if residual.dim() == 4 else residual[None]
+    wrong = F.max_pool2d(batched.permute(0, 3, 1, 2), WINDOW, stride=1) > tolerance
+    windows = torch.where(wrong, windows, windows.detach())
+    return (1.0 - lambda_dssim) * F.relu(residual - tolerance).mean() + lambda_dssim * (1.0 - windows.mean())
 
 
 def camera_extent(cameras: Sequence[Camera]) -> float:

@@ -40,6 +40,8 @@ from .texture_bank import TextureBank
 GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
 """The tensors the correction phases train."""
 COLOR_ATTACHMENT = "c_g"
+CORRECT_TOLERANCE = 0.5 / 255
+"""Residuals the correction phases leave alone: half an 8-bit grey level (see fit.reconstruction_loss)."""
 RATIO_ATTACHMENT = "ratio_limit"
 """Per Gaussian, the scale ratio the correction phases tolerate (children inherit their parent's)."""
 
@@ -205,7 +207,7 @@ class Styliser:
         colors = self.opt.attachments[COLOR_ATTACHMENT]
         out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
                      render_depth=False)
-        loss = reconstruction_loss(out.colors[0], view.content_image) + \
+        loss = reconstruction_loss(out.colors[0], view.content_image, tolerance=CORRECT_TOLERANCE) + \
             cfg.lambda_scale * scale_regulariser(self.scene.log_scales, self.opt.attachments[RATIO_ATTACHMENT])
         loss.backward()
         self._step(loss)
