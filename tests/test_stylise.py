@@ -27,6 +27,22 @@ def random_extractor() -> FeatureExtractor:
     return FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
 
 
+def gpb_only(original: GaussianScene, start: GaussianScene, cameras: list[Camera], config: TransferConfig,
+             background: torch.Tensor) -> Styliser:
+    """A styliser of ``start`` whose content images are renders of ``original`` (random features, a tiny bank)."""
+    content = render_views(original, cameras, background, "auto")
+    extractor = random_extractor()
+    targets = view_targets(content, original, extractor, config, "auto")
+    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
+                              texture_height=64)
+    return Styliser(start, targets, list(range(len(cameras))), bank, extractor, config, background)
+
+
+def run_corrections(styliser: Styliser) -> None:
+    for _ in range(styliser.config.correct_steps):
+        styliser.correct_step()
+
+
 def test_schedule_alternates_and_densifies_in_the_first_half():
     config = TransferConfig(stylise_steps=10, correct_steps=7, rounds=4, gpb=True, densify=True)
     styliser = Styliser.__new__(Styliser)
@@ -47,24 +63,18 @@ def test_geometry_preservation_branch_pulls_perturbed_geometry_back():
     config = TransferConfig(stylise_steps=0, correct_steps=120, rounds=1, gpb=True, densify=False, n_scales=1,
                             lambda_scale=0.0)
     background = torch.ones(3)
-    content = render_views(original, cameras, background, "auto")
-    extractor = random_extractor()
-    targets = view_targets(content, original, extractor, config, "auto")
-    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
-                              texture_height=64)
     noise = torch.randn(original.means.shape, generator=torch.Generator().manual_seed(0)) * 0.03
     perturbed = replace(original, means=original.means + noise)
-    styliser = Styliser(perturbed, targets, list(range(len(cameras))), bank, extractor, config, background)
+    styliser = gpb_only(original, perturbed, cameras, config, background)
 
     def errors() -> tuple[float, float]:
         scene = styliser.scene.detach()
         image_error = sum(float((render(scene, [t.camera], background=background).colors[0] - t.content_image)
-                                .abs().mean()) for t in targets)
+                                .abs().mean()) for t in styliser.views)
         return float((scene.means - original.means).norm(dim=1).mean()), image_error
 
     start_distance, start_image = errors()
-    for _ in range(config.correct_steps):
-        styliser.correct_step()
+    run_corrections(styliser)
     distance, image = errors()
     assert distance < 0.85 * start_distance and image < 0.7 * start_image
     assert torch.equal(styliser.scene.sh_dc, perturbed.sh_dc)  # the correction phase leaves colours alone
@@ -144,8 +154,7 @@ def test_orientation_control_turns_the_texture(shared, tmp_path):
 def test_correction_keeps_a_fitted_scenes_thin_gaussians_unless_told_otherwise(from_start):
     """GPB alone on a scene its content images show exactly, half of it needles of ratio 30: with
     ``scale_ratio_from_start`` the regulariser tolerates each Gaussian's own shape, so the scales stay
-    where the fit put them; with the authors' fixed limit
-    it squashes the needles, bending the geometry."""
+    where the fit put them; with the authors' fixed limit it squashes the needles, bending the geometry."""
     original = blob_scene(600, seed=3).with_sh_degree(0)
     log_scales = original.log_scales.clone()
     log_scales[::2, 0] = log_scales[::2, 1] + math.log(30.0)
@@ -153,15 +162,8 @@ def test_correction_keeps_a_fitted_scenes_thin_gaussians_unless_told_otherwise(f
     cameras = auto_views(original, 4, width=40, height=40)
     config = TransferConfig(stylise_steps=0, correct_steps=40, rounds=1, gpb=True, densify=False, n_scales=1,
                             lambda_scale=0.1, scale_ratio_limit=10.0, scale_ratio_from_start=from_start)
-    background = torch.ones(3)
-    content = render_views(original, cameras, background, "auto")
-    extractor = random_extractor()
-    targets = view_targets(content, original, extractor, config, "auto")
-    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
-                              texture_height=64)
-    styliser = Styliser(original, targets, list(range(len(cameras))), bank, extractor, config, background)
-    for _ in range(config.correct_steps):
-        styliser.correct_step()
+    styliser = gpb_only(original, original, cameras, config, torch.ones(3))
+    run_corrections(styliser)
     ratios = anisotropy(styliser.scene.log_scales.detach())[::2]
     drift = float((styliser.scene.log_scales.detach() - original.log_scales).abs().mean())
     if from_start:  # nothing differs from the content images and no needle exceeds its own limit
@@ -176,14 +178,7 @@ def test_correction_leaves_a_scene_that_fits_its_content_images_exactly_unchange
     original = blob_scene(500, seed=4).with_sh_degree(0)
     cameras = auto_views(original, 4, width=40, height=40)
     config = TransferConfig(stylise_steps=0, correct_steps=30, rounds=1, gpb=True, densify=False, n_scales=1)
-    background = torch.ones(3)
-    content = render_views(original, cameras, background, "auto")
-    extractor = random_extractor()
-    targets = view_targets(content, original, extractor, config, "auto")
-    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
-                              texture_height=64)
-    styliser = Styliser(original, targets, list(range(len(cameras))), bank, extractor, config, background)
-    for _ in range(config.correct_steps):
-        styliser.correct_step()
+    styliser = gpb_only(original, original, cameras, config, torch.ones(3))
+    run_corrections(styliser)
     for name in ("means", "quats", "log_scales", "opacity_logits"):
         assert torch.equal(getattr(styliser.scene, name).detach(), getattr(original, name)), name
