@@ -51,8 +51,10 @@ def test_schedule_alternates_and_densifies_in_the_first_half():
     assert [p[0] for p in phases] == ["stylise", "correct"] * 4
     assert sum(n for p, n, _ in phases if p == "stylise") == 10 and sum(n for p, n, _ in phases if p == "correct") == 7
     assert [d for p, _, d in phases if p == "stylise"] == [True, True, False, False]
-    styliser.config = replace(config, gpb=False)
-    assert styliser.phases() == [("stylise", 10, True)]
+    styliser.config = replace(config, gpb=False)  # the same densifying half, no correction phases
+    assert styliser.phases() == [("stylise", 5, True), ("stylise", 5, False)]
+    styliser.config = replace(config, gpb=False, densify=False)
+    assert styliser.phases() == [("stylise", 10, False)]
 
 
 def test_geometry_preservation_branch_pulls_perturbed_geometry_back():

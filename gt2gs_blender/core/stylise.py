@@ -130,16 +130,24 @@ class Styliser:
 
     # -- schedule ---------------------------------------------------------------------------------
     def phases(self) -> list[tuple[str, int, bool]]:
-        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct) when the GPB is on."""
+        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct). Without the GPB the
+        stylise phases join, densifying over the same first half of the steps as with it, so that
+        removing the GPB removes only the correction phases."""
         cfg = self.config
-        rounds = max(1, cfg.rounds if cfg.gpb else 1)
-        out = []
+        rounds = max(1, cfg.rounds)
+        out: list[tuple[str, int, bool]] = []
         for r in range(rounds):
             stylise = cfg.stylise_steps * (r + 1) // rounds - cfg.stylise_steps * r // rounds
             out.append(("stylise", stylise, cfg.densify and r < math.ceil(rounds / 2)))
             if cfg.gpb:
                 out.append(("correct", cfg.correct_steps * (r + 1) // rounds - cfg.correct_steps * r // rounds, False))
-        return [p for p in out if p[1] > 0]
+        joined: list[tuple[str, int, bool]] = []
+        for phase in (p for p in out if p[1] > 0):
+            if joined and joined[-1][0] == phase[0] and joined[-1][2] == phase[2]:
+                joined[-1] = (phase[0], joined[-1][1] + phase[1], phase[2])
+            else:
+                joined.append(phase)
+        return joined
 
     # -- stylise ----------------------------------------------------------------------------------
     def stylise_step(self, densify: bool) -> tuple[float, torch.Tensor]:
