@@ -67,7 +67,8 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
         "device": device.lower(), "weights_path": addon.weights_path(context),
         "threads": prefs.threads if prefs and prefs.threads > 0 else None,
     }
-    for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles")):
+    for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles"),
+                      ("texture_height", "texture_size")):
         if getattr(settings, prop) > 0:
             config[key] = getattr(settings, prop)
     for key in ("gt2", "afcm", "gpb", "densify"):  # switched off by the user; on means as the preset does

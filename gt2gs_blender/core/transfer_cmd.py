@@ -36,6 +36,9 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast", help="settings preset (default: fast)")
     p.add_argument("--steps", type=int, metavar="N", help="stylisation steps (default: the preset's)")
     p.add_argument("--resolution", type=int, metavar="PX", help="longest side of the working views")
+    p.add_argument("--texture-height", type=int, metavar="PX",
+                   help="texture height on the nearest surfaces, in pixels at half the working resolution as the "
+                        "feature network sees it (default: the preset's, 256); smaller repeats the pattern more often")
     p.add_argument("--seed", type=int, help="random seed (default: 0)")
     p.add_argument("--weights", type=Path, metavar="PATH", help="VGG weights file or folder (see README)")
     p.add_argument("--no-color-transfer", dest="color_transfer", action="store_false", default=None,
@@ -77,7 +80,8 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     """The preset with the command line's overrides (options not given keep the preset's value)."""
     weights = args.weights if args.weights is not None else os.environ.get("GT2GS_WEIGHTS_DIR") or _shared_weights()
     return preset(
-        args.preset, stylise_steps=args.steps, resolution=args.resolution, seed=args.seed,
+        args.preset, stylise_steps=args.steps, resolution=args.resolution, texture_height=args.texture_height,
+        seed=args.seed,
         weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,

@@ -17,8 +17,8 @@ def _is_splat(self, obj) -> bool:
     return splats.is_splat_object(obj)
 
 
-def _angle_changed(self, context) -> None:
-    """Re-render the orientation preview when the angle changes, if the user asked for it."""
+def _layout_changed(self, context) -> None:
+    """Re-render the orientation preview when the texture's angle or size changes, if the user asked for it."""
     if self.auto_preview and bpy.ops.gt2gs.preview_orientation.poll():
         bpy.ops.gt2gs.preview_orientation("INVOKE_DEFAULT")
 
@@ -50,9 +50,9 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                          description="preview: seconds; fast: minutes on a CPU; balanced: more views and detail")
     angle: FloatProperty(name="Orientation", default=0.0, min=-180.0, max=180.0, precision=1,
                          description="Angle of the texture in the first view, degrees counter-clockwise",
-                         update=_angle_changed)
+                         update=_layout_changed)
     auto_preview: BoolProperty(name="Live Orientation Preview", default=False,
-                               description="Re-render the orientation preview whenever the angle changes")
+                               description="Re-render the orientation preview whenever the angle or texture size changes")
     lambda_content: FloatProperty(
         name="Content Strength", default=DEFAULTS.lambda_content, min=0.0, soft_max=0.05, precision=4, step=0.01,
         description="How strongly the original appearance is kept (paper: 0.005 forward-facing, 0.0005 360°)")
@@ -62,6 +62,11 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                             description="Longest side of the working views in pixels (0: preset)")
     n_angles: IntProperty(name="Texture Rotations", default=0, min=0, max=360,
                           description="Rotations of the texture in the feature bank (0: preset)")
+    texture_size: IntProperty(name="Texture Size", default=0, min=0, soft_max=1024,
+                              description="Height of the texture on the nearest surfaces, in pixels of the view at half "
+                                          "the working resolution, as the feature network sees it (0: preset, 256); "
+                                          "smaller repeats the pattern more often. Preview Orientation shows it",
+                              update=_layout_changed)
     seed: IntProperty(name="Seed", default=0, min=0)
     color_transfer: BoolProperty(name="Colour Transfer", default=True,
                                  description="Match the scene's colours to the texture's before and after")

@@ -159,7 +159,7 @@ class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.gt2gs
         column = self.layout.column()
-        for name in ("steps", "resolution", "n_angles", "seed", "color_transfer", "depth_groups", "gt2", "afcm", "gpb",
+        for name in ("steps", "resolution", "n_angles", "texture_size", "seed", "color_transfer", "depth_groups", "gt2", "afcm", "gpb",
                      "densify"):
             column.prop(settings, name)
 
