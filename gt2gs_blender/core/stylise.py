@@ -6,8 +6,10 @@ cells get targets from the texture bank guided by the prior angles carried from 
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
 In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
 Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and
-only their geometry learns, against the content images, with the 3DGS reconstruction loss and the
-scale regulariser, so what the texture loss bent out of shape goes back.
+only their geometry learns, against the content images, with the 3DGS reconstruction loss (blind to
+residuals under half a grey level, so geometry that already fits stays put) and the scale
+regulariser (tolerating each Gaussian's starting elongation), so what densification and the texture
+loss bent out of shape goes back.
 Gaussians outside the region never change (the optimiser's frozen rows).
 """
 from __future__ import annotations
