@@ -64,7 +64,7 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                           description="Rotations of the texture in the feature bank (0: preset)")
     texture_size: IntProperty(name="Texture Size", default=0, min=0, soft_max=1024,
                               description="Height of the texture on the nearest surfaces, in pixels of the view at half "
-                                          "the working resolution, as the feature network sees it (0: preset, 256); "
+                                          "the working resolution, as the feature network sees it (0: preset, 256; preview 128); "
                                           "smaller repeats the pattern more often. Preview Orientation shows it",
                               update=_layout_changed)
     seed: IntProperty(name="Seed", default=0, min=0)
