@@ -38,7 +38,8 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resolution", type=int, metavar="PX", help="longest side of the working views")
     p.add_argument("--texture-height", type=int, metavar="PX",
                    help="texture height on the nearest surfaces, in pixels at half the working resolution as the "
-                        "feature network sees it (default: the preset's, 256; preview 128); smaller repeats the pattern more often")
+                        "feature network sees it (default: the preset's, 256; preview 128); smaller repeats the "
+                        "pattern more often")
     p.add_argument("--seed", type=int, help="random seed (default: 0)")
     p.add_argument("--weights", type=Path, metavar="PATH", help="VGG weights file or folder (see README)")
     p.add_argument("--no-color-transfer", dest="color_transfer", action="store_false", default=None,

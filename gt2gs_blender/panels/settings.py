@@ -52,7 +52,8 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                          description="Angle of the texture in the first view, degrees counter-clockwise",
                          update=_layout_changed)
     auto_preview: BoolProperty(name="Live Orientation Preview", default=False,
-                               description="Re-render the orientation preview whenever the angle or texture size changes")
+                               description="Re-render the orientation preview whenever the angle or the texture "
+                                           "size changes")
     lambda_content: FloatProperty(
         name="Content Strength", default=DEFAULTS.lambda_content, min=0.0, soft_max=0.05, precision=4, step=0.01,
         description="How strongly the original appearance is kept (paper: 0.005 forward-facing, 0.0005 360°)")
