@@ -64,9 +64,10 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
     n_angles: IntProperty(name="Texture Rotations", default=0, min=0, max=360,
                           description="Rotations of the texture in the feature bank (0: preset)")
     texture_size: IntProperty(name="Texture Size", default=0, min=0, soft_max=1024,
-                              description="Height of the texture on the nearest surfaces, in pixels of the view at half "
-                                          "the working resolution, as the feature network sees it (0: preset, 256; preview 128); "
-                                          "smaller repeats the pattern more often. Preview Orientation shows it",
+                              description="Height of the texture on the nearest surfaces, in pixels of the view at "
+                                          "half the working resolution, as the feature network sees it (0: preset, "
+                                          "256; preview 128); smaller repeats the pattern more often. Preview "
+                                          "Orientation shows it",
                               update=_layout_changed)
     seed: IntProperty(name="Seed", default=0, min=0)
     color_transfer: BoolProperty(name="Colour Transfer", default=True,
