@@ -302,7 +302,7 @@ def transfer(
     scene is not modified. The restyled Gaussians are view-independent (no SH bands above 0, as in
     the paper's code; ``config.stylised_sh_degree`` > 0 keeps and trains view-dependent bands); without
     a region the whole result has SH degree ``config.stylised_sh_degree``. Raises ``Cancelled``
-    when ``cancel()`` returns True. ``config.threads`` > 0 caps the CPU threads for the run.
+    when ``cancel()`` returns True. ``config.threads`` > 0 sets the CPU thread count for the run.
     """
     config = config or TransferConfig()
     with cpu_threads(config.threads):

@@ -82,8 +82,7 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     weights = args.weights if args.weights is not None else os.environ.get("GT2GS_WEIGHTS_DIR") or _shared_weights()
     return preset(
         args.preset, stylise_steps=args.steps, resolution=args.resolution, texture_height=args.texture_height,
-        seed=args.seed,
-        weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
+        seed=args.seed, weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
         gpb=args.gpb, densify=args.densify, skip_hidden=args.skip_hidden, plateau_window=args.plateau_window,
