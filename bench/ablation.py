@@ -1,8 +1,11 @@
 """The paper's ablation on our scenes: full GT²-GS vs no GT² loss (NNFM) vs no AFCM vs no GPB, same budget.
 
-``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D]`` prints a table of SSIM,
-short/long-range RMSE and LPIPS, texture match, time and Gaussian count, writes
-bench/out/ablation.json and a PNG strip per scene (texture, original, then each variant, 3 views).
+``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D] [--seeds S]`` prints a
+table of SSIM, short/long-range RMSE and LPIPS, texture match, time and Gaussian count (with ``--seeds`` > 1 a row per
+seed, then each variant's mean and half-range), writes bench/out/ablation.json and a PNG strip per scene (texture,
+original, then each variant, 3 views; first seed).
+"No GT²" is the paper's NNFM loss (Eq. 1): nearest cells of the texture's own feature map. Texture match is
+measured against the labelled bank (every orientation and scale) for every variant.
 Every variant runs every step of the preset's schedule (no loss-plateau stop), so the budgets are
 equal: a variant without the GPB stylises in one phase, whose plateau comes at another step count.
 The donut uses 16 automatic orbit views; the fern is the shared LLFF capture fitted with the fit
@@ -65,8 +68,9 @@ def load_scene(name: str, fit_iterations: int) -> tuple[GaussianScene, list[Came
 
 
 def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] | None, overrides: dict,
-                args: argparse.Namespace, background: tuple[float, float, float]) -> tuple[dict, GaussianScene]:
-    config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"),
+                args: argparse.Namespace, background: tuple[float, float, float],
+                seed: int) -> tuple[dict, GaussianScene]:
+    config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"), seed=seed,
                     background=background, stylised_sh_degree=args.sh_degree, plateau_window=0, **overrides)
     start = time.perf_counter()
     result = transfer(scene, texture, views, config)
@@ -92,6 +96,20 @@ def strip(texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[C
     return (np.concatenate(rows, axis=0) * 255 + 0.5).astype(np.uint8)
 
 
+def seed_summary(rows: list[dict]) -> tuple[dict, dict]:
+    """Mean and half-range over seeds of every metric, the time and the Gaussian count."""
+    keys = METRICS + ("seconds", "n_gaussians")
+    values = {k: [r[k] for r in rows if r[k] is not None] for k in keys}
+    mean = {k: float(np.mean(v)) if v else None for k, v in values.items()}
+    spread = {k: (max(v) - min(v)) / 2.0 if v else None for k, v in values.items()}
+    return mean, spread
+
+
+def print_row(scene: str, label: str, row: dict) -> None:
+    cells = " ".join(f"{row[m]:>13.4f}" if row[m] is not None else f"{'-':>13}" for m in METRICS)
+    print(f"{scene:<6} {label:<12} {cells} {row['seconds']:>6.0f} {row['n_gaussians']:>7,.0f}", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", choices=tuple(SCENES), default=list(SCENES))
@@ -100,25 +118,33 @@ def main() -> None:
     parser.add_argument("--steps", type=int, help="stylise steps (default: the preset's)")
     parser.add_argument("--fit-iterations", type=int, default=1500, help="fern fit steps when it must be fitted")
     parser.add_argument("--sh-degree", type=int, default=0, help="SH degree of the restyled colours (0-3)")
+    parser.add_argument("--seeds", type=int, default=1, help="runs per variant, seeds 0..S-1 (densify and view draws)")
     parser.add_argument("--json", type=Path, help="records (default bench/out/ablation[_shD].json)")
     args = parser.parse_args()
     suffix = f"_sh{args.sh_degree}" if args.sh_degree else ""
     args.json = args.json or OUT / f"ablation{suffix}.json"
     OUT.mkdir(parents=True, exist_ok=True)
     records = []
-    print(f"{'scene':<6} {'variant':<8} " + " ".join(f"{m:>13}" for m in METRICS) + f" {'s':>6} {'N':>7}")
+    print(f"{'scene':<6} {'variant':<12} " + " ".join(f"{m:>13}" for m in METRICS) + f" {'s':>6} {'N':>7}")
     for scene_name in args.scenes:
         texture_name, background = SCENES[scene_name]
         scene, views = load_scene(scene_name, args.fit_iterations)
         texture = load_texture(SHARED / "data" / "textures" / texture_name)
         results = {"original": scene}
         for variant in args.variants:
-            row, results[variant] = run_variant(scene, texture, views, VARIANTS[variant], args, background)
-            row.update(scene=scene_name, variant=variant, texture=texture_name, preset=args.preset,
-                       sh_degree=args.sh_degree, load=os.getloadavg())
-            records.append(row)
-            cells = " ".join(f"{row[m]:>13.4f}" if row[m] is not None else f"{'-':>13}" for m in METRICS)
-            print(f"{scene_name:<6} {variant:<8} {cells} {row['seconds']:>6.0f} {row['n_gaussians']:>7,}", flush=True)
+            rows = []
+            for seed in range(args.seeds):
+                row, result = run_variant(scene, texture, views, VARIANTS[variant], args, background, seed)
+                results.setdefault(variant, result)
+                row.update(scene=scene_name, variant=variant, seed=seed, texture=texture_name, preset=args.preset,
+                           sh_degree=args.sh_degree, load=os.getloadavg())
+                rows.append(row)
+                print_row(scene_name, variant if args.seeds == 1 else f"{variant}/{seed}", row)
+            records.extend(rows)
+            if args.seeds > 1:
+                mean, spread = seed_summary(rows)
+                print_row(scene_name, f"{variant} mean", mean)
+                print_row(scene_name, "  ± half", spread)
         cameras = fit_cameras(scene, views, 256, 16)
         picks = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(STRIP_VIEWS)]
         png = OUT / f"ablation_{scene_name}{suffix}.png"

@@ -17,6 +17,7 @@ from gt2gs_blender.core.texture_bank import (
     covered_cells,
     crop_side,
     depth_groups,
+    feature_map_bank,
     rotate_crop,
 )
 
@@ -79,6 +80,24 @@ def test_labels_scales_and_counts():
     expected = [crop_side(128, 149), crop_side(85, 99), crop_side(64, 75)]
     assert sorted(set(sides), reverse=True) == expected == [80, 48, 32]
     assert max(s[0] for s in spy.shapes if s[-1] == 80) == 3 and sum(s[0] for s in spy.shapes) == 24
+
+
+def test_feature_map_bank_is_every_cell_of_the_texture_as_it_lies():
+    """NNFM's bank: the whole map at texture_height, unrotated (its cells match the labelled bank's
+    photo angle), unlabelled."""
+    extractor = OrientedEnergy()
+    labelled = build_texture_bank(stripes(128, 0.0), extractor, extractor_id="toy", n_scales=1, n_angles=36,
+                                  texture_height=128, cells=4)
+    bank = feature_map_bank(stripes(256, 30.0), extractor, extractor_id="toy", texture_height=128)
+    assert len(bank) == 32 * 32 and bank.features.shape == (1024, 8)  # 128 px at stride 4
+    torch.testing.assert_close(bank.features.norm(dim=1), torch.ones(1024))
+    assert bank.scales == (1.0,) and bank.angles == (0.0,) and not bank.k.any() and not bank.theta.any()
+    inner = bank.features.reshape(32, 32, 8)[4:-4, 4:-4].reshape(-1, 8)  # away from the padded border
+    theta = labelled.theta[(inner @ labelled.features.T).argmax(dim=1)]
+    error = (theta - 30.0 + 180.0) % 360.0 - 180.0
+    assert error.abs().max() <= 5.0 + 1e-6
+    with pytest.raises(ValueError, match="texture_height"):
+        feature_map_bank(stripes(64, 0.0), extractor, extractor_id="toy", texture_height=0)
 
 
 def test_bank_scales_follow_the_depth_ratio():

@@ -148,3 +148,15 @@ def test_threads_cap_the_run_and_are_restored(cache):
     assert torch.get_num_threads() == before
     with pytest.raises(ValueError, match="threads"):
         tiny(threads=-1)
+
+
+def test_without_gt2_the_loss_is_plain_nnfm_on_the_textures_own_feature_map(cache):
+    """--no-gt2 matches the texture's feature map as it is (paper Eq. 1), and still reports the texture
+    match against the labelled bank, so the variants compare."""
+    texture = stripes()
+    nnfm = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, gt2=False, evaluate=True))
+    gt2 = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, evaluate=True))
+    assert nnfm.report["bank"] == {"features": 24 * 24, "scales": [1.0], "angles": 1}  # 96 px at stride 4
+    assert gt2.report["bank"]["angles"] == 4 and gt2.report["bank"]["scales"] == [1.0, 0.5]
+    assert nnfm.report["metrics"]["texture_match_start"] == pytest.approx(gt2.report["metrics"]["texture_match_start"])
+    assert not torch.equal(nnfm.scene.sh_dc, gt2.scene.sh_dc)

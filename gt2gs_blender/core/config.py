@@ -24,7 +24,7 @@ class TransferConfig:
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
     color_transfer: bool = True      # ARF colour transfer before and after stylisation
     angle: float = 0.0               # orientation control: the texture's angle in the first view (degrees)
-    gt2: bool = True                 # GT² loss: targets guided by angles carried across views (False = NNFM)
+    gt2: bool = True                 # GT² loss: angles carried across views (False = NNFM on the texture as it lies)
     lambda_prior: float = 0.002      # prior angle cost per degree (authors' code: 100 = a hard constraint)
     afcm: bool = True                # Adaptive Fine-grained Control Module weights per feature cell
     lambda_depth: float = 0.8        # AFCM {lambda_d, lambda_f, lambda_phi} (paper 0.8, 0.8, 0.25)

@@ -4,6 +4,7 @@ Geometry Preservation Branch's correction phases, with densification early on (p
 Stylise phase: only the DC colours learn. Views are visited in the GT² order; each view's feature
 cells get targets from the texture bank guided by the prior angles carried from the previous view
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
+Without GT² (``gt2`` off) the targets are plain NNFM's: the nearest cell of the texture's own feature map.
 In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
 Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and
 only their geometry learns, against the content images, with the 3DGS reconstruction loss (blind to
@@ -183,8 +184,9 @@ class Styliser:
         """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
         cfg = self.config
         prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
-        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0, view.groups,
-                                 view.mask)
+        # NNFM's bank is one unlabelled feature map: every cell matches all of it, whatever its depth group
+        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0,
+                                 view.groups if cfg.gt2 else None, view.mask)
         self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
         c = feats.shape[0]
         targets = self.bank.features[match.indices.reshape(-1)].to(feats)

@@ -22,6 +22,7 @@ From each crop the extractor's centre ``cells x cells`` feature cells are kept, 
 over channels: ``K * n_angles * cells^2`` features in (k, theta, row, col) order.
 
 Banks are cached as .npz files keyed by the decoded texture, every setting and the extractor id.
+:func:`feature_map_bank` is the NNFM baseline's bank instead: the texture's feature map as it is.
 """
 from __future__ import annotations
 
@@ -169,6 +170,31 @@ def build_texture_bank(
     if path is not None:
         _save(path, bank, settings)
     return bank
+
+
+def feature_map_bank(
+    texture: np.ndarray,
+    extractor: Extractor,
+    *,
+    extractor_id: str,
+    texture_height: int = 256,
+    device: torch.device | str | None = None,
+) -> TextureBank:
+    """The NNFM loss's style features (paper Eq. 1, ARF): every feature cell of the texture resized
+    to ``texture_height``, unit-normalised, as it is: one scale, no rotation (k = 0, theta = 0).
+
+    This is the baseline the GT² loss improves on: no geometric labels, so a view can only match the
+    texture the way it lies in the photo. ``cells`` is 0 (the whole map, not a centre crop)."""
+    if texture_height < 1:
+        raise ValueError(f"need texture_height >= 1, got {texture_height}")
+    image = np.ascontiguousarray(_resize_to_height(np.asarray(texture, dtype=np.float32), texture_height))
+    x = torch.from_numpy(image).permute(2, 0, 1)[None].to(device or _device_of(extractor))
+    with torch.no_grad():
+        feats = extractor(x)[0]
+    c = feats.shape[0]
+    rows = F.normalize(feats.float().reshape(c, -1).T, dim=1, eps=1e-8).cpu()
+    return TextureBank(features=rows, k=torch.zeros(len(rows), dtype=torch.long), theta=torch.zeros(len(rows)),
+                       scales=(1.0,), angles=(0.0,), cells=0, extractor_id=extractor_id)
 
 
 def _labelled(features: torch.Tensor, settings: dict) -> TextureBank:

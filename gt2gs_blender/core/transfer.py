@@ -49,6 +49,7 @@ from .texture_bank import (
     compact_bank,
     covered_cells,
     depth_groups,
+    feature_map_bank,
 )
 
 BANK_MAX_CROP = 64
@@ -235,6 +236,13 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
     ).to(device)
 
 
+def nnfm_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig,
+              device: torch.device) -> TextureBank:
+    """The plain NNFM loss's bank (``gt2`` off): the texture's own feature map at scale 1."""
+    return feature_map_bank(texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
+                            texture_height=config.texture_height, device=device).to(device)
+
+
 @torch.no_grad()
 def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig,
                  backend: str) -> list[ViewTargets]:
@@ -354,7 +362,9 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
     tracker.end()
 
     tracker.begin("bank")
-    bank = build_bank(image, extractor, config, device, tracker)
+    # the labelled bank serves GT² matching and the texture-match metric of every variant
+    labelled = build_bank(image, extractor, config, device, tracker) if config.gt2 or config.evaluate else None
+    bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, device)
     matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
     tracker.end()
 
@@ -369,7 +379,8 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
     work = _assemble(work, restyled, start, selected, hidden, _structure_changed(stats))
-    metrics = _evaluate(work, content, targets, bank, extractor, config) if config.evaluate else None
+    metrics = _evaluate(work, content, targets, labelled, extractor, config) if labelled is not None and config.evaluate \
+        else None
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),

@@ -49,7 +49,8 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--angle", type=float, metavar="DEG",
                    help="orientation control: the texture's angle in the first view, degrees counter-clockwise")
     p.add_argument("--no-gt2", dest="gt2", action="store_false", default=None,
-                   help="plain NNFM texture loss instead of the GT² loss with prior views")
+                   help="the paper's NNFM baseline instead of the GT² loss: nearest cells of the texture's own "
+                        "feature map, as it lies (no orientations, scales or prior views; --angle has no effect)")
     p.add_argument("--no-afcm", dest="afcm", action="store_false", default=None,
                    help="no adaptive fine-grained control (every feature cell weighs the same)")
     p.add_argument("--no-gpb", dest="gpb", action="store_false", default=None,
