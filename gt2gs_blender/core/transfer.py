@@ -379,8 +379,9 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
     work = _assemble(work, restyled, start, selected, hidden, _structure_changed(stats))
-    metrics = _evaluate(work, content, targets, labelled, extractor, config) if labelled is not None and config.evaluate \
-        else None
+    metrics = None
+    if config.evaluate and labelled is not None:  # always built when evaluating
+        metrics = _evaluate(work, content, targets, labelled, extractor, config)
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
