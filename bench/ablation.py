@@ -10,6 +10,9 @@ Every variant runs every step of the preset's schedule (no loss-plateau stop), s
 equal: a variant without the GPB stylises in one phase, whose plateau comes at another step count.
 The donut uses 16 automatic orbit views; the fern is the shared LLFF capture fitted with the fit
 engine (``bench/fit_fern.py`` output, fitted here first when missing) seen from its own cameras.
+``--video K`` also measures consistency the peers' way (StyleGaussian, cited by the paper): on a rendered video, a
+smooth path with K frames between consecutive views (closed around the donut's orbit), frames i vs i+1 (video_st)
+and i vs i+7 (video_lt), which on the donut's 16 views at K = 8 are 2.8 and 20 degrees apart instead of 22.5 and 157.
 ``--sh-degree D`` > 0 runs every variant with view-dependent restyled colours (stylised_sh_degree):
 the setting of the NNFM baselines, where per-view disagreements can show up as view-dependent colour,
 so that long-range consistency can tell the variants apart (at 0 both are consistent by construction).
@@ -30,8 +33,11 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.cameras import Camera, load_views  # noqa: E402
+from gt2gs_blender.core.cameras import Camera, camera_path, load_views  # noqa: E402
 from gt2gs_blender.core.config import preset  # noqa: E402
+from gt2gs_blender.core.gt2 import view_order  # noqa: E402
+from gt2gs_blender.core.lpips import load_lpips  # noqa: E402
+from gt2gs_blender.core.metrics import LONG_RANGE, SHORT_RANGE, consistency  # noqa: E402
 from gt2gs_blender.core.fit import FitConfig, fit_llff  # noqa: E402
 from gt2gs_blender.core.ply import read_ply  # noqa: E402
 from gt2gs_blender.core.rasterizer import render  # noqa: E402
@@ -54,6 +60,7 @@ SCENES = {
 STRIP_VIEWS = 3
 TILE = 192
 METRICS = ("ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match")
+VIDEO_METRICS = ("video_st_rmse", "video_st_lpips", "video_lt_rmse", "video_lt_lpips")
 
 
 def load_scene(name: str, fit_iterations: int) -> tuple[GaussianScene, list[Camera] | None]:
@@ -77,7 +84,23 @@ def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] |
     row = {k: result.report["metrics"][k] for k in METRICS}
     row.update(texture_match_start=result.report["metrics"]["texture_match_start"],
                seconds=time.perf_counter() - start, n_gaussians=result.report["n_gaussians"])
+    if args.video:
+        row.update(video_consistency(result.scene, views, args.video, background))
     return row, result.scene
+
+
+def video_consistency(scene: GaussianScene, views: list[Camera] | None, frames_per_gap: int,
+                      background: tuple[float, float, float]) -> dict:
+    """``video_{st,lt}_{rmse,lpips}``: consistency on a smooth path through the run's views in visiting order."""
+    cameras = fit_cameras(scene, views, 256, 16)
+    path = camera_path([cameras[i] for i in view_order(cameras)], frames_per_gap, closed=views is None)
+    out = render(scene, path, background=torch.tensor(background))
+    lpips = load_lpips(SHARED / "weights")
+    row = {}
+    for prefix, offset in (("video_st", SHORT_RANGE), ("video_lt", LONG_RANGE)):
+        scores = consistency(out.colors.clamp(0, 1), out.depths, out.alphas, path, offset, lpips=lpips)
+        row[f"{prefix}_rmse"], row[f"{prefix}_lpips"] = scores["rmse"], scores["lpips"]
+    return row
 
 
 def strip(texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[Camera],
@@ -96,17 +119,17 @@ def strip(texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[C
     return (np.concatenate(rows, axis=0) * 255 + 0.5).astype(np.uint8)
 
 
-def seed_summary(rows: list[dict]) -> tuple[dict, dict]:
+def seed_summary(rows: list[dict], metrics: tuple[str, ...]) -> tuple[dict, dict]:
     """Mean and half-range over seeds of every metric, the time and the Gaussian count."""
-    keys = METRICS + ("seconds", "n_gaussians")
+    keys = metrics + ("seconds", "n_gaussians")
     values = {k: [r[k] for r in rows if r[k] is not None] for k in keys}
     mean = {k: float(np.mean(v)) if v else None for k, v in values.items()}
     spread = {k: (max(v) - min(v)) / 2.0 if v else None for k, v in values.items()}
     return mean, spread
 
 
-def print_row(scene: str, label: str, row: dict) -> None:
-    cells = " ".join(f"{row[m]:>13.4f}" if row[m] is not None else f"{'-':>13}" for m in METRICS)
+def print_row(scene: str, label: str, row: dict, metrics: tuple[str, ...]) -> None:
+    cells = " ".join(f"{row[m]:>13.4f}" if row[m] is not None else f"{'-':>13}" for m in metrics)
     print(f"{scene:<6} {label:<12} {cells} {row['seconds']:>6.0f} {row['n_gaussians']:>7,.0f}", flush=True)
 
 
@@ -118,6 +141,8 @@ def main() -> None:
     parser.add_argument("--steps", type=int, help="stylise steps (default: the preset's)")
     parser.add_argument("--fit-iterations", type=int, default=1500, help="fern fit steps when it must be fitted")
     parser.add_argument("--sh-degree", type=int, default=0, help="SH degree of the restyled colours (0-3)")
+    parser.add_argument("--video", type=int, default=0, metavar="K",
+                        help="also video consistency: K path frames per view gap (0 = off)")
     parser.add_argument("--seeds", type=int, default=1, help="runs per variant, seeds 0..S-1 (densify and view draws)")
     parser.add_argument("--json", type=Path, help="records (default bench/out/ablation[_shD].json)")
     args = parser.parse_args()
@@ -125,7 +150,8 @@ def main() -> None:
     args.json = args.json or OUT / f"ablation{suffix}.json"
     OUT.mkdir(parents=True, exist_ok=True)
     records = []
-    print(f"{'scene':<6} {'variant':<12} " + " ".join(f"{m:>13}" for m in METRICS) + f" {'s':>6} {'N':>7}")
+    metrics = METRICS + (VIDEO_METRICS if args.video else ())
+    print(f"{'scene':<6} {'variant':<12} " + " ".join(f"{m:>13}" for m in metrics) + f" {'s':>6} {'N':>7}")
     for scene_name in args.scenes:
         texture_name, background = SCENES[scene_name]
         scene, views = load_scene(scene_name, args.fit_iterations)
@@ -139,12 +165,12 @@ def main() -> None:
                 row.update(scene=scene_name, variant=variant, seed=seed, texture=texture_name, preset=args.preset,
                            sh_degree=args.sh_degree, load=os.getloadavg())
                 rows.append(row)
-                print_row(scene_name, variant if args.seeds == 1 else f"{variant}/{seed}", row)
+                print_row(scene_name, variant if args.seeds == 1 else f"{variant}/{seed}", row, metrics)
             records.extend(rows)
             if args.seeds > 1:
-                mean, spread = seed_summary(rows)
-                print_row(scene_name, f"{variant} mean", mean)
-                print_row(scene_name, "  ± half", spread)
+                mean, spread = seed_summary(rows, metrics)
+                print_row(scene_name, f"{variant} mean", mean, metrics)
+                print_row(scene_name, "  ± half", spread, metrics)
         cameras = fit_cameras(scene, views, 256, 16)
         picks = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(STRIP_VIEWS)]
         png = OUT / f"ablation_{scene_name}{suffix}.png"

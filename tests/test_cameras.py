@@ -19,6 +19,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gt2gs_blender.core.cameras import (
+    camera_path,
     Camera, LLFFData, arc_views, auto_views, estimate_up_axis, load_cameras_json, load_colmap,
     load_colmap_points, load_llff, load_views, look_at, orbit_views, save_cameras_json, stack_cameras,
 )
@@ -792,3 +793,27 @@ def test_auto_views_validation() -> None:
         auto_views(scene, 4, up="sideways")
     cams = auto_views(scene, 4, width=64, height=32, margin=1.0)
     assert all((c.width, c.height) == (64, 32) for c in cams)
+
+
+def test_camera_path_through_an_orbit_turns_like_a_denser_orbit() -> None:
+    """Slerp between orbit views is exactly the rotation of the orbit view at the middle azimuth; the path
+    passes through the given cameras and closes when asked."""
+    coarse = orbit_views((0.0, 0.0, 0.0), 3.0, 8, width=64, height=48, elevation_deg=25.0)
+    fine = orbit_views((0.0, 0.0, 0.0), 3.0, 32, width=64, height=48, elevation_deg=25.0)
+    path = camera_path(coarse, 4, closed=True)
+    assert len(path) == 32 and len(camera_path(coarse, 4)) == 29
+    for i, cam in enumerate(path):
+        rotation = cam.world_to_cam[:3, :3]
+        np.testing.assert_allclose(rotation, fine[i].world_to_cam[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(rotation @ rotation.T, np.eye(3), atol=1e-12)
+        if i % 4 == 0:
+            np.testing.assert_allclose(cam.world_to_cam, coarse[i // 4].world_to_cam, atol=1e-12)
+    chord_middle = (coarse[0].center + coarse[1].center) / 2.0
+    np.testing.assert_allclose(path[2].center, chord_middle, atol=1e-12)
+    assert (path[1].fx, path[1].width, path[1].height) == (coarse[0].fx, 64, 48)
+    with pytest.raises(ValueError, match="frames_per_gap"):
+        camera_path(coarse, 0)
+    flipped = Camera.from_cam_to_world(coarse[0].cam_to_world[:3, :3] @ np.diag([-1.0, -1.0, 1.0]) @ np.diag(
+        [1.0, -1.0, -1.0]), coarse[0].center, 50.0, 50.0, 32.0, 24.0, 64, 48)
+    with pytest.raises(ValueError, match="180 degrees"):
+        camera_path([coarse[0], flipped], 2)

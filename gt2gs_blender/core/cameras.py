@@ -749,6 +749,45 @@ def look_at(
                                     width / 2.0, height / 2.0, width, height, name)
 
 
+def camera_path(cameras: Sequence[Camera], frames_per_gap: int, *, closed: bool = False) -> list[Camera]:
+    """A smooth path through ``cameras`` in their order, as a rendered video would go: ``frames_per_gap``
+    frames from each camera to the next (the camera itself first), rotation by slerp, centre linear,
+    intrinsics and size of the gap's first camera; ``closed`` adds the gap from the last back to the first,
+    else the last camera ends the path. Consecutive cameras must turn by less than 180 degrees."""
+    if frames_per_gap < 1 or not cameras:
+        raise ValueError(f"need cameras and frames_per_gap >= 1, got {len(cameras)} and {frames_per_gap}")
+    gaps = len(cameras) if closed and len(cameras) > 1 else len(cameras) - 1
+    path = []
+    for i in range(gaps):
+        a, b = cameras[i], cameras[(i + 1) % len(cameras)]
+        r_a = a.cam_to_world[:3, :3]
+        axis_angle = _rotation_log(r_a.T @ b.cam_to_world[:3, :3])
+        for k in range(frames_per_gap):
+            t = k / frames_per_gap
+            path.append(Camera.from_cam_to_world(r_a @ _rotation_exp(t * axis_angle), (1 - t) * a.center + t * b.center,
+                                                 a.fx, a.fy, a.cx, a.cy, a.width, a.height, f"{a.name}+{k}"))
+    return path if closed and len(cameras) > 1 else path + [cameras[-1]]
+
+
+def _rotation_log(r: np.ndarray) -> np.ndarray:
+    """Axis times angle (radians) of a rotation matrix with angle below 180 degrees."""
+    angle = math.acos(min(1.0, max(-1.0, (np.trace(r) - 1.0) / 2.0)))
+    if angle > math.pi - 1e-6:
+        raise ValueError("consecutive cameras turn by 180 degrees: the path between them is ambiguous")
+    skew = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2.0
+    return skew if angle < 1e-12 else skew * angle / math.sin(angle)
+
+
+def _rotation_exp(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix of axis times angle ``w`` (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if angle < 1e-12:
+        return np.eye(3) + k
+    k /= angle
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
 def orbit_views(
     center: Sequence[float], radius: float, n: int, *, width: int, height: int, fov_deg: float = 50.0,
     elevation_deg: float = 20.0, up: Sequence[float] = (0.0, 0.0, 1.0), front: Sequence[float] = (0.0, -1.0, 0.0),
