@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT))
 from gt2gs_blender.core.cameras import Camera, camera_path, load_views  # noqa: E402
 from gt2gs_blender.core.config import preset  # noqa: E402
 from gt2gs_blender.core.gt2 import view_order  # noqa: E402
-from gt2gs_blender.core.lpips import load_lpips  # noqa: E402
+from gt2gs_blender.core.lpips import LPIPS, load_lpips  # noqa: E402
 from gt2gs_blender.core.metrics import LONG_RANGE, SHORT_RANGE, consistency  # noqa: E402
 from gt2gs_blender.core.fit import FitConfig, fit_llff  # noqa: E402
 from gt2gs_blender.core.ply import read_ply  # noqa: E402
@@ -75,8 +75,8 @@ def load_scene(name: str, fit_iterations: int) -> tuple[GaussianScene, list[Came
 
 
 def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] | None, overrides: dict,
-                args: argparse.Namespace, background: tuple[float, float, float],
-                seed: int) -> tuple[dict, GaussianScene]:
+                args: argparse.Namespace, background: tuple[float, float, float], seed: int,
+                video: tuple[list[Camera], LPIPS] | None) -> tuple[dict, GaussianScene]:
     config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"), seed=seed,
                     background=background, stylised_sh_degree=args.sh_degree, plateau_window=0, **overrides)
     start = time.perf_counter()
@@ -84,18 +84,21 @@ def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] |
     row = {k: result.report["metrics"][k] for k in METRICS}
     row.update(texture_match_start=result.report["metrics"]["texture_match_start"],
                seconds=time.perf_counter() - start, n_gaussians=result.report["n_gaussians"])
-    if args.video:
-        row.update(video_consistency(result.scene, views, args.video, background))
+    if video is not None:
+        row.update(video_consistency(result.scene, *video, background))
     return row, result.scene
 
 
-def video_consistency(scene: GaussianScene, views: list[Camera] | None, frames_per_gap: int,
-                      background: tuple[float, float, float]) -> dict:
-    """``video_{st,lt}_{rmse,lpips}``: consistency on a smooth path through the run's views in visiting order."""
+def video_path(scene: GaussianScene, views: list[Camera] | None, frames_per_gap: int) -> list[Camera]:
+    """A smooth path through the original scene's views in visiting order (the same for every variant)."""
     cameras = fit_cameras(scene, views, 256, 16)
-    path = camera_path([cameras[i] for i in view_order(cameras)], frames_per_gap, closed=views is None)
+    return camera_path([cameras[i] for i in view_order(cameras)], frames_per_gap, closed=views is None)
+
+
+def video_consistency(scene: GaussianScene, path: list[Camera], lpips: LPIPS,
+                      background: tuple[float, float, float]) -> dict:
+    """``video_{st,lt}_{rmse,lpips}``: consistency of ``scene`` rendered along ``path``."""
     out = render(scene, path, background=torch.tensor(background))
-    lpips = load_lpips(SHARED / "weights")
     row = {}
     for prefix, offset in (("video_st", SHORT_RANGE), ("video_lt", LONG_RANGE)):
         scores = consistency(out.colors.clamp(0, 1), out.depths, out.alphas, path, offset, lpips=lpips)
@@ -157,10 +160,12 @@ def main() -> None:
         scene, views = load_scene(scene_name, args.fit_iterations)
         texture = load_texture(SHARED / "data" / "textures" / texture_name)
         results = {"original": scene}
+        video = (video_path(scene, views, args.video), load_lpips(SHARED / "weights")) if args.video else None
         for variant in args.variants:
             rows = []
             for seed in range(args.seeds):
-                row, result = run_variant(scene, texture, views, VARIANTS[variant], args, background, seed)
+                row, result = run_variant(scene, texture, views, VARIANTS[variant], args, background, seed,
+                                          video)
                 results.setdefault(variant, result)
                 row.update(scene=scene_name, variant=variant, seed=seed, texture=texture_name, preset=args.preset,
                            sh_degree=args.sh_degree, load=os.getloadavg())
