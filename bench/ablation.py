@@ -78,7 +78,8 @@ def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] |
                 args: argparse.Namespace, background: tuple[float, float, float], seed: int,
                 video: tuple[list[Camera], LPIPS] | None) -> tuple[dict, GaussianScene]:
     config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"), seed=seed,
-                    background=background, stylised_sh_degree=args.sh_degree, plateau_window=0, **overrides)
+                    background=background, stylised_sh_degree=args.sh_degree, plateau_window=0,
+                    **{**args.overrides, **overrides})
     start = time.perf_counter()
     result = transfer(scene, texture, views, config)
     row = {k: result.report["metrics"][k] for k in METRICS}
@@ -147,8 +148,11 @@ def main() -> None:
     parser.add_argument("--video", type=int, default=0, metavar="K",
                         help="also video consistency: K path frames per view gap (0 = off)")
     parser.add_argument("--seeds", type=int, default=1, help="runs per variant, seeds 0..S-1 (densify and view draws)")
+    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="TransferConfig overrides for every variant (values in JSON: 1, 0.5, true)")
     parser.add_argument("--json", type=Path, help="records (default bench/out/ablation[_shD].json)")
     args = parser.parse_args()
+    args.overrides = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
     suffix = f"_sh{args.sh_degree}" if args.sh_degree else ""
     args.json = args.json or OUT / f"ablation{suffix}.json"
     OUT.mkdir(parents=True, exist_ok=True)
@@ -178,7 +182,7 @@ def main() -> None:
                 print_row(scene_name, "  ± half", spread, metrics)
         cameras = fit_cameras(scene, views, 256, 16)
         picks = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(STRIP_VIEWS)]
-        png = OUT / f"ablation_{scene_name}{suffix}.png"
+        png = args.json.with_name(f"{args.json.stem}_{scene_name}.png")
         cv2.imwrite(str(png), cv2.cvtColor(strip(texture, results, picks, background), cv2.COLOR_RGB2BGR))
         print(f"strip: {png}")
     args.json.write_text(json.dumps(records, indent=1))

@@ -14,7 +14,7 @@ from gt2gs_blender.core.features import VGG19_NORM_RELU3, FeatureExtractor
 from gt2gs_blender.core.losses import anisotropy
 from gt2gs_blender.core.rasterizer import render
 from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.stylise import Styliser
+from gt2gs_blender.core.stylise import GEOMETRY, Styliser
 from gt2gs_blender.core.texture_bank import build_texture_bank
 from gt2gs_blender.core.transfer import render_views, transfer, view_targets
 from gt2gs_blender.core.weights import ResolvedWeights
@@ -82,12 +82,30 @@ def test_geometry_preservation_branch_pulls_perturbed_geometry_back():
     assert torch.equal(styliser.scene.sh_dc, perturbed.sh_dc)  # the correction phase leaves colours alone
 
 
-def test_region_control_leaves_other_gaussians_bit_identical(tmp_path):
+@pytest.mark.parametrize("stylise_geometry", [False, True])
+def test_stylise_phases_move_geometry_only_when_told(stylise_geometry):
+    """Colours-only stylisation leaves every geometry tensor exactly as it was; ``stylise_geometry``
+    (the authors' coupled optimisation) lets the texture loss move all of them."""
+    original = blob_scene(300, seed=4).with_sh_degree(0)
+    cameras = auto_views(original, 3, width=48, height=48)
+    config = TransferConfig(stylise_steps=4, correct_steps=0, rounds=1, densify=False, n_scales=1,
+                            stylise_geometry=stylise_geometry)
+    styliser = gpb_only(original, original, cameras, config, torch.ones(3))
+    for _ in range(config.stylise_steps):
+        styliser.stylise_step(densify=False)
+    scene = styliser.scene.detach()
+    assert not torch.equal(scene.sh_dc, original.sh_dc)
+    for name in GEOMETRY:
+        assert torch.equal(getattr(scene, name), getattr(original, name)) != stylise_geometry, name
+
+
+@pytest.mark.parametrize("stylise_geometry", [False, True])
+def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_geometry):
     scene = blob_scene()  # SH degree 1, with an extra property
     region = torch.zeros(len(scene), dtype=torch.bool)
     region[::3] = True
     config = tiny(cache_dir=str(tmp_path), stylise_steps=6, correct_steps=4, rounds=2, gpb=True, densify=True,
-                  densify_every=2, densify_grad_threshold=0.0)
+                  densify_every=2, densify_grad_threshold=0.0, stylise_geometry=stylise_geometry)
     result = transfer(scene, stripes(), None, config, region=region)
     out, kept = result.scene, int((~region).sum())
     outside = scene.subset(~region)

@@ -31,6 +31,8 @@ class TransferConfig:
     lambda_frequency: float = 0.8
     lambda_distortion: float = 0.25
     gpb: bool = True                 # Geometry Preservation Branch: correction phases between stylise phases
+    stylise_geometry: bool = False   # the texture loss moves geometry too, as in the authors' code (bolder texture,
+                                     # looser shape; the GPB pulls it back). Off: stylise phases train colours only
     rounds: int = 4                  # stylise/correct alternations (the steps are split evenly)
     correct_steps: int = 100         # GPB correction steps in all (geometry vs content images)
     lambda_scale: float = 0.1        # scale regulariser weight in the correction phases (paper 0.1)
@@ -111,6 +113,7 @@ PAPER_SCHEDULE: dict[str, Any] = dict(
     lambda_style=2.0, lambda_tv=0.02, lambda_prior=100.0,
     lambda_depth=0.8, lambda_frequency=0.8, lambda_distortion=0.25,
     lambda_scale=0.1, scale_ratio_limit=1.0, scale_ratio_from_start=False,
+    stylise_geometry=True,   # the authors' stylise phases step every parameter, geometry included
     plateau_window=0,        # the paper's step counts, run in full
     match_channels=0,        # and its matching on every channel
 )

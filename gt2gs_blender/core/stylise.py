@@ -1,7 +1,8 @@
 """The optimisation of a texture transfer: stylise phases (GT² loss, AFCM) alternating with the
 Geometry Preservation Branch's correction phases, with densification early on (paper §3.2-3.4).
 
-Stylise phase: only the DC colours learn. Views are visited in the GT² order; each view's feature
+Stylise phase: the DC colours learn (with ``stylise_geometry``, as in the authors' code, the geometry
+too, under the texture loss and the scale regulariser). Views are visited in the GT² order; each view's feature
 cells get targets from the texture bank guided by the prior angles carried from the previous view
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
 Without GT² (``gt2`` off) the targets are plain NNFM's: the nearest cell of the texture's own feature map.
@@ -158,7 +159,7 @@ class Styliser:
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
-        self.opt.set_trainable(self.colors)
+        self.opt.set_trainable(self.colors + GEOMETRY if cfg.stylise_geometry else self.colors)
         out = render(self.scene, [view.camera], background=self.background, backend=cfg.backend, render_depth=False)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
@@ -167,6 +168,8 @@ class Styliser:
         style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
         loss = cfg.lambda_style * style + cfg.lambda_content * content_loss(feats, view.content_features) \
             + cfg.lambda_tv * tv_loss(image[None])
+        if cfg.stylise_geometry:
+            loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
         if densify and out.projection is not None:
             self.stats.add(out.projection, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
@@ -220,11 +223,15 @@ class Styliser:
         out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
                      render_depth=False)
         loss = reconstruction_loss(out.colors[0], view.content_image, tolerance=CORRECT_TOLERANCE) + \
-            cfg.lambda_scale * scale_regulariser(self.scene.log_scales, self.opt.attachments[RATIO_ATTACHMENT])
+            cfg.lambda_scale * self._scale_term()
         loss.backward()
         self._step(loss)
         self.report.correct_steps += 1
         return float(loss.detach())
+
+    def _scale_term(self) -> torch.Tensor:
+        """The scale regulariser at each Gaussian's tolerated ratio."""
+        return scale_regulariser(self.scene.log_scales, self.opt.attachments[RATIO_ATTACHMENT])
 
     def _step(self, loss: torch.Tensor) -> None:
         if not self.opt.step(loss):

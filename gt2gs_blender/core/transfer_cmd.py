@@ -54,7 +54,11 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-afcm", dest="afcm", action="store_false", default=None,
                    help="no adaptive fine-grained control (every feature cell weighs the same)")
     p.add_argument("--no-gpb", dest="gpb", action="store_false", default=None,
-                   help="no geometry preservation branch (geometry never learns)")
+                   help="no geometry preservation branch (geometry then learns only from the texture loss, "
+                        "with --stylise-geometry, else never)")
+    p.add_argument("--stylise-geometry", action=argparse.BooleanOptionalAction, default=None,
+                   help="let the texture loss move, scale and turn the splats too, as the paper's code does "
+                        "(default: on in the paper presets, else off): bolder texture, looser shape")
     p.add_argument("--no-densify", dest="densify", action="store_false", default=None,
                    help="no densification while stylising")
     p.add_argument("--no-skip-hidden", dest="skip_hidden", action="store_false", default=None,
@@ -86,8 +90,9 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
         seed=args.seed, weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
         depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
-        gpb=args.gpb, densify=args.densify, skip_hidden=args.skip_hidden, plateau_window=args.plateau_window,
-        match_channels=args.match_channels, mixed_precision=args.mixed_precision, threads=args.threads, **extra,
+        gpb=args.gpb, stylise_geometry=args.stylise_geometry, densify=args.densify, skip_hidden=args.skip_hidden,
+        plateau_window=args.plateau_window, match_channels=args.match_channels, mixed_precision=args.mixed_precision,
+        threads=args.threads, **extra,
     )
 
 

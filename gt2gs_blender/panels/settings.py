@@ -80,6 +80,10 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                        description="Weight the texture loss by depth, detail and distortion (AFCM)")
     gpb: BoolProperty(name="Geometry Preservation", default=True,
                       description="Alternate stylisation with phases that keep the geometry (off: faster)")
+    stylise_geometry: BoolProperty(name="Texture Moves Splats", default=False,
+                                   description="Let the texture loss move, scale and turn splats too, as the paper's "
+                                               "code does (always on in the paper presets): bolder texture, looser "
+                                               "shape, which Geometry Preservation pulls back")
     densify: BoolProperty(name="Densify", default=True,
                           description="Add splats where the texture needs detail (off: the splat count stays)")
     device: EnumProperty(
