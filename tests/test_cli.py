@@ -295,7 +295,7 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
                        *DEMO_FAST, "--region", str(region), "--angle", "30", "--no-gt2", "--no-afcm", "--no-gpb",
                        "--stylise-geometry", "--no-densify", "--no-skip-hidden", "--no-mixed-precision", "--threads", "1",
-                       "--texture-height", "96",
+                       "--texture-height", "96", "--depth-ratio", "1.5",
                        "--report", str(tmp_path / "r.json"))
     assert code == 0, err
     before, after = read_ply(small_ply), read_ply(out)
@@ -306,6 +306,7 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden",
                                                                    "mixed_precision"))
     assert config["threads"] == 1 and config["texture_height"] == 96 and config["stylise_geometry"]
+    assert config["depth_ratio"] == 1.5
 
 
 def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):

@@ -86,16 +86,19 @@ def stripe_period(row: np.ndarray) -> float:
     return float(np.diff(rises).mean())
 
 
-def test_nearer_depth_group_shows_the_texture_larger():
-    """A wall tilted away from the camera: its near half gets the larger (scale 1) texture."""
+@pytest.mark.parametrize("depth_ratio, low, high", [(0.0, 1.5, 2.5), (1.0, 0.9, 1.1)])
+def test_nearer_depth_group_shows_the_texture_larger(depth_ratio, low, high):
+    """A wall tilted away from the camera: its near half gets the larger (scale 1) texture, by the
+    view's depth ratio (capped at 2: this wall spans more); a fixed ratio of 1 keeps one size."""
     vertical = np.ascontiguousarray(horizontal_stripes(period=8).transpose(1, 0, 2))
     scene = wall(tilt=1.5)
     cam = look_at((0.0, 0.0, -3.0), (0.0, 0.0, 0.0), width=256, height=256, fov_deg=60.0, up=(0.0, -1.0, 0.0))
-    image = orientation_preview(scene, vertical, cam, 0.0, texture_height=128, n_groups=2).mean(axis=-1)
+    image = orientation_preview(scene, vertical, cam, 0.0, texture_height=128, n_groups=2,
+                                depth_ratio=depth_ratio).mean(axis=-1)
     rows = np.flatnonzero((image < 250).mean(axis=1) > 0.3)  # rows the wall covers
     near, far = rows[len(rows) // 5], rows[-len(rows) // 5]  # -y (top) tilts towards the camera
     near_row, far_row = (image[r][image[r] < 250] for r in (near, far))
-    assert stripe_period(near_row) > 1.5 * stripe_period(far_row)
+    assert low < stripe_period(near_row) / stripe_period(far_row) < high
 
 
 def test_preview_is_fast_at_256_pixels():

@@ -18,6 +18,7 @@ from gt2gs_blender.core.texture_bank import (
     crop_side,
     depth_groups,
     feature_map_bank,
+    group_depth_ratio,
     rotate_crop,
 )
 
@@ -213,6 +214,32 @@ def test_depth_groups_bin_the_surface_depth_nearest_first():
     assert fixed[0].tolist() == [0] * 9
     assert depth_groups(z, torch.zeros_like(z), 3).eq(-1).all()
     assert depth_groups(torch.ones(2, 2), torch.ones(2, 2), 3).eq(0).all()
+
+
+def test_group_depth_ratio_is_the_far_over_the_near_bin_centre():
+    z = torch.linspace(2.0, 4.0, 101).repeat(2, 1)            # bins of 0.5: centres 2.25 ... 3.75
+    alpha = torch.full_like(z, 0.9)
+    alpha[1, 60:] = 0.1                                      # poorly covered pixels don't count
+    assert group_depth_ratio(z * alpha, alpha, 4) == pytest.approx(3.75 / 2.25)
+    assert group_depth_ratio(z[:1] * alpha[:1], alpha[:1], 2) == pytest.approx(3.5 / 2.5)
+    assert group_depth_ratio(z * alpha, alpha, 1) == 1.0
+    assert group_depth_ratio(z, torch.zeros_like(z), 4) == 1.0
+
+
+@pytest.mark.parametrize("near, far", [(2.0, 3.0), (10.0, 11.0), (1.0, 1.8)])
+def test_measured_bank_scales_give_every_depth_group_the_same_world_scale(near, far):
+    """Paper §3.2: a group's texture is shown Z_1/Z_k as large, so that a surface gets the same texture
+    size in the world (image size x depth) whichever group a view puts it in; the authors' fixed
+    ratio 2 would shrink a shallow scene's far groups too much (a surface 157 degrees round an orbit
+    flips from near to far and would get two sizes)."""
+    z = torch.linspace(near, far, 4001)
+    alpha = torch.ones_like(z)
+    groups = depth_groups(z, alpha, 4)
+    mean_depth = torch.stack([z[groups == k].mean() for k in range(4)])
+    world = torch.tensor(bank_scales(4, (1.0, group_depth_ratio(z, alpha, 4)))) * mean_depth
+    assert torch.allclose(world, world[0], rtol=1e-3)
+    fixed = torch.tensor(bank_scales(4, (1.0, 2.0))) * mean_depth
+    assert (fixed[-1] / fixed[0]).item() < 0.8
 
 
 def test_cell_groups_take_the_most_frequent_group_of_each_cell():

@@ -7,7 +7,7 @@ import torch
 
 from gt2gs_blender.core.config import PRESETS, TransferConfig, preset
 from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.transfer import Cancelled, transfer
+from gt2gs_blender.core.transfer import Cancelled, ViewSet, bank_depth_ratio, transfer
 
 
 def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
@@ -154,9 +154,30 @@ def test_without_gt2_the_loss_is_plain_nnfm_on_the_textures_own_feature_map(cach
     """--no-gt2 matches the texture's feature map as it is (paper Eq. 1), and still reports the texture
     match against the labelled bank, so the variants compare."""
     texture = stripes()
-    nnfm = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, gt2=False, evaluate=True))
-    gt2 = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, evaluate=True))
+    nnfm = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, gt2=False, evaluate=True, depth_ratio=2.0))
+    gt2 = transfer(blob_scene(), texture, None, tiny(cache_dir=cache, evaluate=True, depth_ratio=2.0))
     assert nnfm.report["bank"] == {"features": 24 * 24, "scales": [1.0], "angles": 1}  # 96 px at stride 4
     assert gt2.report["bank"]["angles"] == 4 and gt2.report["bank"]["scales"] == [1.0, 0.5]
     assert nnfm.report["metrics"]["texture_match_start"] == pytest.approx(gt2.report["metrics"]["texture_match_start"])
     assert not torch.equal(nnfm.scene.sh_dc, gt2.scene.sh_dc)
+
+
+@pytest.mark.parametrize("near, far, expected", [(2.0, 3.0, 2.875 / 2.125), (1.0, 5.0, 2.0)])
+def test_bank_depth_ratio_is_the_views_own_up_to_the_cap(near, far, expected):
+    """The bank's far/near ratio is measured over all views together (paper: Z_1/Z_k), capped at the
+    authors' 2 for deep scenes, rounded to 0.01; a configured ratio wins."""
+    depths = [torch.linspace(near, (near + far) / 2, 64).reshape(8, 8), torch.linspace(near, far, 64).reshape(8, 8)]
+    views = ViewSet([], [torch.zeros(8, 8, 3)] * 2, [torch.ones(8, 8)] * 2, depths, torch.ones(3))
+    assert bank_depth_ratio(views, TransferConfig()) == pytest.approx(round(expected, 2))
+    assert bank_depth_ratio(views, TransferConfig(depth_ratio=3.0)) == 3.0
+    assert bank_depth_ratio(views, TransferConfig(n_scales=1)) == 1.0
+    with pytest.raises(ValueError, match="depth_ratio"):
+        TransferConfig(depth_ratio=0.5)
+
+
+def test_a_shallow_scene_gets_its_own_bank_scales(cache):
+    """The blob seen from around it spans far less than twice its nearest depth: the bank's scales
+    follow the measured ratio, not the authors' fixed 2."""
+    report = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache)).report
+    scales = report["bank"]["scales"]
+    assert 0.5 < scales[-1] < 0.95 and scales[0] == 1.0

@@ -74,6 +74,8 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     for key in ("gt2", "afcm", "gpb", "densify"):  # switched off by the user; on means as the preset does
         if not getattr(settings, key):
             config[key] = False
+    if settings.depth_ratio >= 1.0:  # below 1: measured from the views
+        config["depth_ratio"] = settings.depth_ratio
     if settings.stylise_geometry:  # switched on by the user; off means as the preset does
         config["stylise_geometry"] = True
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}

@@ -5,6 +5,11 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 
+MAX_DEPTH_RATIO = 2.0
+"""Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
+the farthest group's texture stays half the nearest's size (128 px at the default height), not a smudge."""
+
+
 @dataclass(frozen=True)
 class TransferConfig:
     """Every setting of a transfer run. Loss weights follow the paper's names (lambda_*)."""
@@ -22,6 +27,8 @@ class TransferConfig:
     n_angles: int = 36               # rotations of the texture over 360 degrees (paper 360)
     texture_height: int = 256        # texture height at the nearest depth group (paper 256)
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
+    depth_ratio: float = 0.0         # farthest/nearest group depth the bank's scales follow: 0 = the views' own
+                                     # (paper: Z_1/Z_k), at most MAX_DEPTH_RATIO; >= 1 fixed (authors' code: 2)
     color_transfer: bool = True      # ARF colour transfer before and after stylisation
     angle: float = 0.0               # orientation control: the texture's angle in the first view (degrees)
     gt2: bool = True                 # GT² loss: angles carried across views (False = NNFM on the texture as it lies)
@@ -85,6 +92,8 @@ class TransferConfig:
                              f"{self.min_new_coverage}")
         if not 0 <= self.stylised_sh_degree <= 3:
             raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
+        if self.depth_ratio != 0.0 and not 1.0 <= self.depth_ratio <= 16.0:
+            raise ValueError(f"depth_ratio must be 0 (measured) or 1..16, got {self.depth_ratio}")
         if self.threads < 0:
             raise ValueError(f"threads must be >= 0 (0 = one per physical core), got {self.threads}")
         if self.hidden_threshold < 0:

@@ -2,7 +2,8 @@
 
 The first view is rendered once; over the pixels the scene covers, the texture is laid out rotated
 by the angle (counter-clockwise on screen, the texture bank's convention) and scaled per depth
-group as the texture bank scales it (nearest group largest), then shaded by the render's
+group as the texture bank scales it (nearest group largest, by the view's own depth ratio unless
+one is given), then shaded by the render's
 luminance so the shape stays readable. No optimisation runs: it takes a fraction of a second and
 lets an artist choose the angle before starting a transfer.
 """
@@ -16,11 +17,12 @@ import numpy as np
 import torch
 
 from .cameras import Camera
+from .config import MAX_DEPTH_RATIO
 from .features import RENDER_SCALE
 from .rasterizer import render
 from .scene import GaussianScene
 from .texture import load_texture
-from .texture_bank import bank_scales, depth_groups
+from .texture_bank import bank_scales, depth_groups, group_depth_ratio
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -50,6 +52,7 @@ def orientation_preview(
     resolution: int = 256,
     texture_height: int = 256,
     n_groups: int = 4,
+    depth_ratio: float = 0.0,
     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
     backend: str = "auto",
 ) -> np.ndarray:
@@ -58,6 +61,7 @@ def orientation_preview(
     ``resolution`` and ``texture_height`` are the transfer's settings: the texture appears as large
     on screen as the transfer's texture bank makes it (its nearest scale spans
     ``texture_height / RENDER_SCALE`` pixels of a ``resolution`` image), so the preview matches the run.
+    ``depth_ratio`` is the run's setting too (0: measured, here on this view alone).
     """
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     cam = camera.scaled(size / max(camera.width, camera.height))
@@ -74,7 +78,9 @@ def orientation_preview(
 
     nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
     laid = np.zeros((cam.height, cam.width, 3), np.float32)
-    for k, factor in enumerate(bank_scales(n_groups)):
+    if depth_ratio <= 0.0:
+        depth_ratio = min(group_depth_ratio(depth, out.alphas[0], n_groups, min_alpha=MIN_ALPHA), MAX_DEPTH_RATIO)
+    for k, factor in enumerate(bank_scales(n_groups, (1.0, depth_ratio))):
         mask = groups == k
         if mask.any():
             laid[mask] = texture_layer(image, angle_deg, nearest_px * factor, cam.width, cam.height)[mask]

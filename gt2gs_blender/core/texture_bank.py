@@ -6,9 +6,12 @@ lowest group depth Z_1 and the group's depth Z_k"):
   holds the NEAREST surfaces, group K-1 the farthest.
 - Bank scale index k serves depth group k: the texture is resized to height
   ``texture_height * scales[k]`` with ``scales[k] = Z_1 / Z_k = 1 / ratios[k]`` and
-  ``ratios = linspace(*depth_ratio_range, K)`` (default 1..2, as the authors' code: heights 256,
-  ~192, ~154, 128 for K = 4). The nearest group sees the texture largest (scale 1), far groups see
-  it smaller, as perspective would show it.
+  ``ratios = linspace(*depth_ratio_range, K)``. The nearest group sees the texture largest (scale 1),
+  far groups see it smaller, as perspective shows it. A run passes the views' own ratio of the
+  farthest to the nearest bin centre (``group_depth_ratio``), so a surface gets one texture size in
+  the world whichever group a view puts it in; the authors' code always uses 1..2 (heights 256,
+  ~192, ~154, 128 for K = 4), which on a shallow object seen from around it (the donut: 1.44) shows
+  the far side's texture too small, and differently sized from the near side's in the opposite view.
 
 Rotations: ``theta`` is the angle, in degrees, by which the texture appears rotated
 COUNTER-CLOCKWISE on screen (image y down), i.e. ``cv2.getRotationMatrix2D(centre, theta, 1)``;
@@ -350,8 +353,7 @@ def depth_groups(
     """
     if n_groups < 1:
         raise ValueError(f"n_groups must be at least 1, got {n_groups}")
-    covered = alpha >= min_alpha
-    z = torch.where(covered, depth / alpha.clamp_min(min_alpha), torch.zeros_like(depth))
+    z, covered = _surface_depth(depth, alpha, min_alpha)
     if depth_range is None:
         if not covered.any():
             return torch.full(depth.shape, -1, dtype=torch.long, device=depth.device)
@@ -361,6 +363,24 @@ def depth_groups(
     t = (z - lo) / (hi - lo) if hi > lo else torch.zeros_like(z)
     groups = (t * n_groups).floor().clamp(0, n_groups - 1).long()
     return torch.where(covered, groups, torch.full_like(groups, -1))
+
+
+def group_depth_ratio(depth: torch.Tensor, alpha: torch.Tensor, n_groups: int, *, min_alpha: float = 0.5) -> float:
+    """Z_K / Z_1 of :func:`depth_groups`' bins over the same covered pixels (bin centres): how many
+    times smaller perspective shows a texture in the farthest group than in the nearest (paper §3.2's
+    scale factors Z_1 / Z_k). 1.0 for one group or nothing covered."""
+    z, covered = _surface_depth(depth, alpha, min_alpha)
+    if n_groups < 2 or not covered.any():
+        return 1.0
+    lo, hi = float(z[covered].min()), float(z[covered].max())
+    step = (hi - lo) / n_groups
+    return (lo + (n_groups - 0.5) * step) / max(lo + 0.5 * step, 1e-12)
+
+
+def _surface_depth(depth: torch.Tensor, alpha: torch.Tensor, min_alpha: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """The surface depth depth/alpha (0 elsewhere) and where alpha >= ``min_alpha`` covers the pixel."""
+    covered = alpha >= min_alpha
+    return torch.where(covered, depth / alpha.clamp_min(min_alpha), torch.zeros_like(depth)), covered
 
 
 def pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: torch.device) -> torch.Tensor:

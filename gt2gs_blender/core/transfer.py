@@ -21,7 +21,7 @@ import torch
 
 from . import color_transfer
 from .cameras import Camera, auto_views
-from .config import TransferConfig
+from .config import MAX_DEPTH_RATIO, TransferConfig
 from .errors import GT2GSError
 from .features import FeatureExtractor, load_feature_extractor, mixed_precision_dtype
 from .gt2 import view_order
@@ -50,6 +50,7 @@ from .texture_bank import (
     covered_cells,
     depth_groups,
     feature_map_bank,
+    group_depth_ratio,
 )
 
 BANK_MAX_CROP = 64
@@ -219,9 +220,20 @@ def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarr
                    sh_rest=torch.where(rows[:, None, None], moved.sh_rest, scene.sh_rest))
 
 
+def bank_depth_ratio(views: ViewSet, config: TransferConfig) -> float:
+    """The farthest over the nearest depth group's depth that the bank's scales follow: the configured
+    one, or the views' (all at once, as their groups), at most MAX_DEPTH_RATIO and rounded to 0.01 so
+    that near-identical view sets share a cached bank (a 0.4 % scale change at most)."""
+    if config.depth_ratio > 0.0:
+        return config.depth_ratio
+    measured = group_depth_ratio(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
+    return round(min(measured, MAX_DEPTH_RATIO), 2)
+
+
 def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig, device: torch.device,
-               tracker: _Tracker) -> TextureBank:
-    """The texture's feature bank at scale 1 (renders are halved before VGG, the texture is not)."""
+               tracker: _Tracker, depth_ratio: float) -> TextureBank:
+    """The texture's feature bank at scale 1 (renders are halved before VGG, the texture is not), its
+    depth groups' scales spanning ``depth_ratio`` (paper §3.2: the group's texture shrinks as Z_1/Z_k)."""
 
     def report(fraction: float) -> None:
         tracker.check_cancel()
@@ -230,7 +242,8 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
     n_angles = bank_angle_count(texture, config)
     return build_texture_bank(
         texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
-        n_scales=config.n_scales, n_angles=n_angles, texture_height=config.texture_height,
+        n_scales=config.n_scales, n_angles=n_angles, depth_ratio_range=(1.0, depth_ratio),
+        texture_height=config.texture_height,
         max_crop=BANK_MAX_CROP, cache_dir=_cache_dir(config), device=device, progress=report,
         angle_offset=config.angle % (360.0 / n_angles),
     ).to(device)
@@ -363,7 +376,9 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
 
     tracker.begin("bank")
     # the labelled bank serves GT² matching and the texture-match metric of every variant
-    labelled = build_bank(image, extractor, config, device, tracker) if config.gt2 or config.evaluate else None
+    depth_ratio = bank_depth_ratio(used, config)
+    labelled = build_bank(image, extractor, config, device, tracker, depth_ratio) \
+        if config.gt2 or config.evaluate else None
     bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, device)
     matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
     tracker.end()

@@ -46,6 +46,10 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
                    help="skip the colour transfer before and after stylisation")
     p.add_argument("--no-depth-groups", dest="depth_groups", action="store_false", default=None,
                    help="match every feature against all texture scales, not its depth group's")
+    p.add_argument("--depth-ratio", type=float, metavar="R",
+                   help="how many times smaller the texture shows on the farthest depth group than on the nearest: "
+                        "0 = as perspective shows it, measured from the views (the paper; default), at most 2; "
+                        "1-16 fixed (the paper's code always uses 2)")
     p.add_argument("--angle", type=float, metavar="DEG",
                    help="orientation control: the texture's angle in the first view, degrees counter-clockwise")
     p.add_argument("--no-gt2", dest="gt2", action="store_false", default=None,
@@ -88,7 +92,7 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     return preset(
         args.preset, stylise_steps=args.steps, resolution=args.resolution, texture_height=args.texture_height,
         seed=args.seed, weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
-        depth_groups=args.depth_groups, background=tuple(args.background), backend=args.backend,
+        depth_groups=args.depth_groups, depth_ratio=args.depth_ratio, background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
         gpb=args.gpb, stylise_geometry=args.stylise_geometry, densify=args.densify, skip_hidden=args.skip_hidden,
         plateau_window=args.plateau_window, match_channels=args.match_channels, mixed_precision=args.mixed_precision,

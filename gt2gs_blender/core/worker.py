@@ -223,7 +223,7 @@ def run_preview(spec: JobSpec, events: Events) -> None:
                                                                  height=spec.preview_size)[0]
     image = orientation_preview(scene, _texture(spec), camera, config.angle, size=spec.preview_size,
                                 resolution=config.resolution, texture_height=config.texture_height,
-                                n_groups=config.n_scales if config.depth_groups else 1,
+                                n_groups=config.n_scales if config.depth_groups else 1, depth_ratio=config.depth_ratio,
                                 background=config.background, backend=config.backend)
     write_png(spec.output, image)
     events("done", output=str(spec.output), report=None)

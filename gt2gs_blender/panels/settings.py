@@ -74,6 +74,10 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                                  description="Match the scene's colours to the texture's before and after")
     depth_groups: BoolProperty(name="Depth Groups", default=True,
                                description="Show the texture larger on near surfaces than on far ones")
+    depth_ratio: FloatProperty(name="Depth Ratio", default=0.0, min=0.0, max=16.0,
+                               description="How many times smaller the texture shows on the farthest surfaces than "
+                                           "on the nearest (below 1: as perspective shows it, measured from the "
+                                           "views, at most 2; the paper's code always uses 2)")
     gt2: BoolProperty(name="GT² Loss", default=True,
                       description="Carry the texture's orientation from view to view (off: plain NNFM matching)")
     afcm: BoolProperty(name="Adaptive Control", default=True,

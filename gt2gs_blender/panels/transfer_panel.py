@@ -159,8 +159,8 @@ class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
     def draw(self, context):
         settings = context.scene.gt2gs
         column = self.layout.column()
-        for name in ("steps", "resolution", "n_angles", "texture_size", "seed", "color_transfer", "depth_groups", "gt2", "afcm", "gpb",
-                     "stylise_geometry", "densify"):
+        for name in ("steps", "resolution", "n_angles", "texture_size", "seed", "color_transfer", "depth_groups",
+                     "depth_ratio", "gt2", "afcm", "gpb", "stylise_geometry", "densify"):
             column.prop(settings, name)
 
 
