@@ -271,3 +271,7 @@ def test_covered_cells_need_a_majority_of_covered_pixels():
     batch = covered_cells(torch.stack([alpha, alpha.flip(-1)]), (2, 2))
     assert batch.shape == (2, 2, 2) and batch[1].tolist() == [[False, True], [False, True]]
     assert covered_cells(alpha, (4, 4)).tolist() == (alpha >= 0.5).tolist()
+    # fraction 1: only wholly covered cells (none of the 2x2 cells here; a 1x2 one)
+    assert not covered_cells(alpha, (2, 2), fraction=1.0).any()
+    assert covered_cells(torch.tensor([[1.0, 0.7], [0.2, 0.9]]), (2, 1), fraction=1.0).tolist() == [[True], [False]]
+    assert covered_cells(alpha, (2, 2), fraction=0.0).tolist() == [[True, True], [True, True]]

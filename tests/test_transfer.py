@@ -181,3 +181,14 @@ def test_a_shallow_scene_gets_its_own_bank_scales(cache):
     report = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache)).report
     scales = report["bank"]["scales"]
     assert 0.5 < scales[-1] < 0.95 and scales[0] == 1.0
+
+
+def test_cell_coverage_changes_what_the_loss_counts_not_the_metric(cache):
+    """``cell_coverage`` 1 keeps silhouette cells out of the texture loss; the texture match (of the start
+    and the result) is still measured on the metric's own covered cells, so the runs compare."""
+    half = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, evaluate=True))
+    whole = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, evaluate=True, cell_coverage=1.0))
+    assert half.report["metrics"]["texture_match_start"] == whole.report["metrics"]["texture_match_start"]
+    assert not torch.equal(half.scene.sh_dc, whole.scene.sh_dc)
+    with pytest.raises(ValueError, match="cell_coverage"):
+        tiny(cell_coverage=1.5)

@@ -26,6 +26,7 @@ class TransferConfig:
     n_scales: int = 4                # texture scales = depth groups (paper K = 4)
     n_angles: int = 36               # rotations of the texture over 360 degrees (paper 360)
     texture_height: int = 256        # texture height at the nearest depth group (paper 256)
+    cell_coverage: float = 0.5       # the texture loss counts feature cells covered beyond this fraction (1: wholly)
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
     depth_ratio: float = 0.0         # farthest/nearest group depth the bank's scales follow: 0 = the views' own
                                      # (paper: Z_1/Z_k), at most MAX_DEPTH_RATIO; >= 1 fixed (authors' code: 2)
@@ -92,6 +93,8 @@ class TransferConfig:
                              f"{self.min_new_coverage}")
         if not 0 <= self.stylised_sh_degree <= 3:
             raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
+        if not 0.0 <= self.cell_coverage <= 1.0:
+            raise ValueError(f"cell_coverage must be in 0..1, got {self.cell_coverage}")
         if self.depth_ratio != 0.0 and not 1.0 <= self.depth_ratio <= 16.0:
             raise ValueError(f"depth_ratio must be 0 (measured) or 1..16, got {self.depth_ratio}")
         if self.threads < 0:

@@ -391,8 +391,10 @@ def pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: to
     return (rows[:, None] * w + cols[None, :]).reshape(-1)
 
 
-def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: float = 0.5) -> torch.Tensor:
-    """Bool (…,h,w): feature cells whose pixels are mostly covered (alpha >= ``min_alpha``).
+def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: float = 0.5,
+                  fraction: float = 0.5) -> torch.Tensor:
+    """Bool (…,h,w): feature cells more than ``fraction`` of whose pixels are covered (alpha >= ``min_alpha``;
+    ``fraction`` 1: every pixel).
 
     The texture loss and texture match count only these: background cells cannot take the texture,
     and on a small object they would otherwise outnumber the object's cells."""
@@ -402,7 +404,7 @@ def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: f
     flat = (alpha >= min_alpha).reshape(-1, height * width).double()
     covered = torch.zeros(flat.shape[0], h * w, dtype=flat.dtype, device=alpha.device).index_add_(1, cell, flat)
     total = torch.bincount(cell, minlength=h * w).to(flat)
-    return (covered > 0.5 * total).reshape(*lead, h, w)
+    return ((covered > fraction * total) | (covered >= total)).reshape(*lead, h, w)
 
 
 def cell_groups(groups: torch.Tensor, feature_hw: tuple[int, int]) -> torch.Tensor:

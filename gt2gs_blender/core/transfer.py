@@ -264,7 +264,8 @@ def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtract
     start_views = render_views(start, views.cameras, views.background, backend)
     images = [start_views.composited(v) for v in range(len(views.cameras))]
     feats = [extractor(_to_nchw(image)) for image in images]
-    masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
+    masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:]), fraction=config.cell_coverage)
+             for v in range(len(feats))]
     groups: list[torch.Tensor | None] = [None] * len(feats)
     if config.depth_groups and config.n_scales > 1:
         # all views at once, so a surface falls in the same depth group in every view
@@ -396,7 +397,7 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
     work = _assemble(work, restyled, start, selected, hidden, _structure_changed(stats))
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
-        metrics = _evaluate(work, content, targets, labelled, extractor, config)
+        metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
@@ -542,10 +543,10 @@ def _without_rest(scene: GaussianScene, rows: torch.Tensor) -> GaussianScene:
 
 
 @torch.no_grad()
-def _evaluate(result: GaussianScene, content: ViewSet, targets: list[ViewTargets], bank: TextureBank,
+def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: list[ViewTargets], bank: TextureBank,
               extractor: FeatureExtractor, config: TransferConfig) -> dict:
     """The paper's metrics on the run's views, and texture match of the colour-transferred start
-    (whose features are the content targets already computed)."""
+    (whose features are the content targets already computed for the ``used`` views)."""
     from .lpips import load_lpips
     from .metrics import evaluate, texture_match
 
@@ -559,7 +560,9 @@ def _evaluate(result: GaussianScene, content: ViewSet, targets: list[ViewTargets
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
                        lpips=lpips, extractor=extractor, bank_features=bank.features)
-    start_features = torch.cat([t.content_features[0].flatten(1).T[t.mask.flatten()] for t in targets])
+    # the metric's own covered cells (as for the result), whatever cells the texture loss counted
+    start_features = torch.cat([t.content_features[0].flatten(1).T[covered_cells(
+        alpha, tuple(t.content_features.shape[-2:])).flatten()] for t, alpha in zip(targets, used.alphas)])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 
