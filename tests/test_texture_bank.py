@@ -275,3 +275,5 @@ def test_covered_cells_need_a_majority_of_covered_pixels():
     assert not covered_cells(alpha, (2, 2), fraction=1.0).any()
     assert covered_cells(torch.tensor([[1.0, 0.7], [0.2, 0.9]]), (2, 1), fraction=1.0).tolist() == [[True], [False]]
     assert covered_cells(alpha, (2, 2), fraction=0.0).tolist() == [[True, True], [True, True]]
+    finer = covered_cells(torch.ones(1, 2), (1, 4), fraction=1.0)  # a grid finer than the image: empty cells
+    assert finer.sum() == 2 and finer.tolist() == covered_cells(torch.ones(1, 2), (1, 4)).tolist()

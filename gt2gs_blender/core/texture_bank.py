@@ -404,7 +404,8 @@ def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: f
     flat = (alpha >= min_alpha).reshape(-1, height * width).double()
     covered = torch.zeros(flat.shape[0], h * w, dtype=flat.dtype, device=alpha.device).index_add_(1, cell, flat)
     total = torch.bincount(cell, minlength=h * w).to(flat)
-    return ((covered > fraction * total) | (covered >= total)).reshape(*lead, h, w)
+    whole = (covered >= total) & (total > 0)  # fraction 1 asks for this; a cell no pixel falls in is never covered
+    return ((covered > fraction * total) | whole).reshape(*lead, h, w)
 
 
 def cell_groups(groups: torch.Tensor, feature_hw: tuple[int, int]) -> torch.Tensor:
