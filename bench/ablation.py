@@ -1,8 +1,8 @@
 """The paper's ablation on our scenes: full GT²-GS vs no GT² loss (NNFM) vs no AFCM vs no GPB, same budget.
 
 ``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D] [--seeds S]
-[--elevation DEG] [--set KEY=VALUE ...] [--json PATH]`` prints a table of SSIM, short/long-range RMSE and LPIPS, texture match, coarse
-long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed, then each variant's mean and
+[--elevation DEG] [--set KEY=VALUE ...] [--json PATH]`` prints a table of SSIM, short/long-range RMSE and
+LPIPS, texture match, coarse long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed, then each variant's mean and
 half-range), writes the records to bench/out/ablation.json (or PATH) and a PNG strip per scene beside them
 (texture, original, then each variant, 3 views; first seed). ``--set`` changes a TransferConfig field for every
 variant: ``--set stylise_geometry=true`` runs the authors' coupled optimisation, where the GPB has geometry to correct.
@@ -71,7 +71,8 @@ COARSE_SIGMA = 2.0
 VIDEO_METRICS = ("video_st_rmse", "video_st_lpips", "video_lt_rmse", "video_lt_lpips")
 
 
-def load_scene(name: str, fit_iterations: int, elevation: float | None = None) -> tuple[GaussianScene, list[Camera] | None]:
+def load_scene(name: str, fit_iterations: int,
+               elevation: float | None = None) -> tuple[GaussianScene, list[Camera] | None]:
     """The scene and its views (None = the transfer's automatic views; the donut's orbit at ``elevation``
     degrees when given: 16 views at 256 px, as the fast preset's own)."""
     if name == "donut":
