@@ -191,7 +191,8 @@ def main() -> None:
         scene, views = load_scene(scene_name, args.fit_iterations, args.elevation)
         texture = load_texture(SHARED / "data" / "textures" / texture_name)
         results = {"original": scene}
-        video = (video_path(scene, views, args.video, closed=scene_name == "donut"), load_lpips(SHARED / "weights")) if args.video else None
+        video = None if not args.video else (video_path(scene, views, args.video, closed=scene_name == "donut"),
+                                             load_lpips(SHARED / "weights"))
         for variant in args.variants:
             rows = []
             for seed in range(args.seeds):
