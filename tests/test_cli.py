@@ -295,7 +295,7 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
                        *DEMO_FAST, "--region", str(region), "--angle", "30", "--no-gt2", "--no-afcm", "--no-gpb",
                        "--stylise-geometry", "--no-densify", "--no-skip-hidden", "--no-mixed-precision", "--threads", "1",
-                       "--texture-height", "96", "--depth-ratio", "1.5",
+                       "--texture-height", "96", "--depth-ratio", "1.5", "--object-backdrop",
                        "--report", str(tmp_path / "r.json"))
     assert code == 0, err
     before, after = read_ply(small_ply), read_ply(out)
@@ -305,7 +305,8 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     config = json.loads((tmp_path / "r.json").read_text())["config"]
     assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden",
                                                                    "mixed_precision"))
-    assert config["threads"] == 1 and config["texture_height"] == 96 and config["stylise_geometry"]
+    assert config["threads"] == 1 and config["texture_height"] == 96
+    assert config["stylise_geometry"] and config["object_backdrop"]
     assert config["depth_ratio"] == 1.5
 
 

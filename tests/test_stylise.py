@@ -99,6 +99,27 @@ def test_stylise_phases_move_geometry_only_when_told(stylise_geometry):
         assert torch.equal(getattr(scene, name), getattr(original, name)) != stylise_geometry, name
 
 
+@pytest.mark.parametrize("object_backdrop", [True, False])
+def test_stylise_renders_see_the_object_not_the_background(object_backdrop):
+    """With ``object_backdrop`` the texture loss sees the object over its own mean colour, so what it
+    teaches does not depend on the background (white and black give the same colours, bit for bit): an
+    outline against the background is nothing to texture. Without it the background shows through.
+    Previews are over the background either way. (AFCM off: its detail map keeps the outline on purpose.)"""
+    original = blob_scene(300, seed=4).with_sh_degree(0)
+    cameras = auto_views(original, 3, width=48, height=48)
+    config = TransferConfig(stylise_steps=3, correct_steps=0, rounds=1, densify=False, n_scales=1, afcm=False,
+                            object_backdrop=object_backdrop)
+    colours = []
+    for background in (torch.ones(3), torch.zeros(3)):
+        styliser = gpb_only(original, original, cameras, config, background)
+        for _ in range(config.stylise_steps):
+            _, shown = styliser.stylise_step(densify=False)
+        uncovered = render(original, [styliser.views[2].camera]).alphas[0] < 1e-4
+        assert uncovered.any() and torch.allclose(shown[uncovered], background.expand(int(uncovered.sum()), 3))
+        colours.append(styliser.scene.detach().sh_dc)
+    assert torch.equal(colours[0], colours[1]) == object_backdrop
+
+
 @pytest.mark.parametrize("stylise_geometry", [False, True])
 def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_geometry):
     scene = blob_scene()  # SH degree 1, with an extra property

@@ -175,6 +175,22 @@ def test_bank_depth_ratio_is_the_views_own_up_to_the_cap(near, far, expected):
         TransferConfig(depth_ratio=0.5)
 
 
+def test_object_colour_is_the_mean_of_covered_pixels():
+    """The stylise backdrop: the un-premultiplied colour of pixels over the alpha threshold, all views
+    together; with nothing covered, the background."""
+    alphas = [torch.tensor([[1.0, 0.95], [0.5, 0.0]]), torch.tensor([[0.92, 0.0], [0.0, 0.0]])]
+    colours = [torch.tensor([[[0.2, 0.4, 0.6], [0.4, 0.4, 0.4]], [[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]]),
+               torch.tensor([[[0.6, 0.1, 0.2], [0.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])]
+    premultiplied = [c * a[..., None] for c, a in zip(colours, alphas)]
+    views = ViewSet([], premultiplied, alphas, [torch.ones(2, 2)] * 2, torch.ones(3))
+    expected = torch.tensor([[0.2, 0.4, 0.6], [0.4, 0.4, 0.4], [0.6, 0.1, 0.2]]).mean(0)
+    assert torch.allclose(views.object_colour(), expected, atol=1e-6)
+    assert torch.allclose(views.composited(0, expected)[1, 1], expected)
+    assert torch.equal(views.composited(0)[1, 1], torch.ones(3))
+    empty = ViewSet([], [torch.zeros(2, 2, 3)], [torch.zeros(2, 2)], [torch.ones(2, 2)], torch.tensor([0.0, 0.5, 1.0]))
+    assert torch.equal(empty.object_colour(), torch.tensor([0.0, 0.5, 1.0]))
+
+
 def test_a_shallow_scene_gets_its_own_bank_scales(cache):
     """The blob seen from around it spans far less than twice its nearest depth: the bank's scales
     follow the measured ratio, not the authors' fixed 2."""

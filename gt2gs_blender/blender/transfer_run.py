@@ -76,8 +76,9 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
             config[key] = False
     if settings.depth_ratio >= 1.0:  # below 1: measured from the views
         config["depth_ratio"] = settings.depth_ratio
-    if settings.stylise_geometry:  # switched on by the user; off means as the preset does
-        config["stylise_geometry"] = True
+    for key in ("stylise_geometry", "object_backdrop"):  # switched on by the user; off means as the preset does
+        if getattr(settings, key):
+            config[key] = True
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
 
 

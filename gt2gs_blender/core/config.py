@@ -27,6 +27,8 @@ class TransferConfig:
     n_angles: int = 36               # rotations of the texture over 360 degrees (paper 360)
     texture_height: int = 256        # texture height at the nearest depth group (paper 256)
     cell_coverage: float = 0.5       # the texture loss counts feature cells covered beyond this fraction (1: wholly)
+    object_backdrop: bool = False    # stylise renders show the object over its own mean colour, not the background:
+                                     # no outline for the texture loss to trace (dark rims; halos of moved splats)
     depth_groups: bool = True        # match each feature cell only against its depth group's scale
     depth_ratio: float = 0.0         # farthest/nearest group depth the bank's scales follow: 0 = the views' own
                                      # (paper: Z_1/Z_k), at most MAX_DEPTH_RATIO; >= 1 fixed (authors' code: 2)

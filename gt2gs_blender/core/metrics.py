@@ -147,12 +147,12 @@ def evaluate(
     out["texture_match"] = None
     if extractor is not None and bank_features is not None:
         # a view at a time (VGG memory); only the cells the object covers: the background takes no texture
-        features = torch.cat([_feature_rows(extractor, image, alpha) for image, alpha in zip(stylised, alphas)])
+        features = torch.cat([covered_features(extractor, image, alpha) for image, alpha in zip(stylised, alphas)])
         out["texture_match"] = texture_match(features, bank_features)
     return out
 
 
-def _feature_rows(extractor: FeatureExtractor, image: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+def covered_features(extractor: FeatureExtractor, image: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
     """The feature vectors (n, C) of the covered cells (:func:`covered_cells` of ``alpha``) of one (H,W,3) image."""
     features = extractor(image.permute(2, 0, 1)[None])[0]
     return features.flatten(1).T[covered_cells(alpha, tuple(features.shape[-2:])).flatten()]

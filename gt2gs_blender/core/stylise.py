@@ -5,6 +5,9 @@ Stylise phase: the DC colours learn (with ``stylise_geometry``, as in the author
 too, under the texture loss and the scale regulariser). Views are visited in the GT² order; each view's feature
 cells get targets from the texture bank guided by the prior angles carried from the previous view
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
+Stylise renders show the object over a backdrop of its own mean colour (``object_backdrop``): over the
+background, a cell on the outline would match a texture edge running along it, which the texture
+loss then paints (a dark rim, a halo of splats) differently in every view.
 Without GT² (``gt2`` off) the targets are plain NNFM's: the nearest cell of the texture's own feature map.
 In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
 Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and
@@ -53,11 +56,13 @@ RATIO_ATTACHMENT = "ratio_limit"
 @dataclass
 class ViewTargets:
     """What the stylise phases need of one view, fixed for the run: the content image (the colour-
-    transferred original render) and its features, covered cells, depth groups, AFCM frequency level,
-    and the prior link to the view visited before it (None for the first)."""
+    transferred original render, over the background), the backdrop (3,) stylise renders are made over
+    and the content features over it, covered cells, depth groups, AFCM frequency level, and the prior
+    link to the view visited before it (None for the first)."""
 
     camera: Camera
     content_image: torch.Tensor
+    backdrop: torch.Tensor
     content_features: torch.Tensor
     mask: torch.Tensor
     groups: torch.Tensor | None
@@ -155,12 +160,12 @@ class Styliser:
 
     # -- stylise ----------------------------------------------------------------------------------
     def stylise_step(self, densify: bool) -> tuple[float, torch.Tensor]:
-        """One GT² step on the next view in order; (texture loss, the rendered image)."""
+        """One GT² step on the next view in order; (texture loss, the rendered image over the background)."""
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
         self.opt.set_trainable(self.colors + GEOMETRY if cfg.stylise_geometry else self.colors)
-        out = render(self.scene, [view.camera], background=self.background, backend=cfg.backend, render_depth=False)
+        out = render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
         distances, weights = self._texture_terms(feats[0], v, view)
@@ -181,7 +186,8 @@ class Styliser:
                                      generator=self.generator)
             self.report.densified.append({"step": self.report.stylise_steps, "cloned": done.cloned,
                                           "split": done.split, "pruned": done.pruned, "total": done.total})
-        return float(style.detach()), image.detach()
+        shown = image.detach() + (1.0 - out.alphas[0].detach()[..., None]) * (self.background - view.backdrop)
+        return float(style.detach()), shown
 
     def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""

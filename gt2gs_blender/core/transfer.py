@@ -55,6 +55,8 @@ from .texture_bank import (
 
 BANK_MAX_CROP = 64
 """Texture crops are capped at 64 px: the kept centre cells are then identical (tested), 3-4x faster."""
+OBJECT_ALPHA = 0.9
+"""Pixels above this alpha count as the object's own colour for the stylise backdrop."""
 STAGE_WEIGHTS = {"prepare": 0.1, "bank": 0.15, "stylise": 0.65, "finish": 0.1}
 """Rough share of a run's time per stage, for the overall progress fraction and the ETA."""
 
@@ -92,8 +94,17 @@ class ViewSet:
     depths: list[torch.Tensor]         # (H,W) expected depth sum(T alpha z)
     background: torch.Tensor           # (3,)
 
-    def composited(self, v: int) -> torch.Tensor:
-        return self.premultiplied[v] + (1.0 - self.alphas[v][..., None]) * self.background
+    def composited(self, v: int, background: torch.Tensor | None = None) -> torch.Tensor:
+        """View ``v`` over ``background`` (3,) (None: the run's background)."""
+        backdrop = self.background if background is None else background
+        return self.premultiplied[v] + (1.0 - self.alphas[v][..., None]) * backdrop
+
+    def object_colour(self, min_alpha: float = OBJECT_ALPHA) -> torch.Tensor:
+        """Mean colour (3,) of the pixels the object covers (alpha above ``min_alpha``) in all views;
+        the background colour when it covers none."""
+        colours = [(p / a[..., None])[a > min_alpha] for p, a in zip(self.premultiplied, self.alphas)]
+        covered = torch.cat(colours) if colours else torch.zeros(0, 3)
+        return covered.mean(0).clamp(0.0, 1.0) if len(covered) else self.background.clone()
 
     def subset(self, keep: Sequence[int]) -> ViewSet:
         """The views ``keep`` (indices, in that order)."""
@@ -259,11 +270,13 @@ def nnfm_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfer
 @torch.no_grad()
 def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig,
                  backend: str) -> list[ViewTargets]:
-    """Per view: the content image (the colour-transferred start's render) and its features, the
-    covered cells, each cell's depth group and the AFCM frequency level."""
+    """Per view: the content image (the colour-transferred start's render), the backdrop the stylise
+    phases render over and the content features over it, the covered cells, each cell's depth group
+    and the AFCM frequency level (of the content image: an outline is detail to keep)."""
     start_views = render_views(start, views.cameras, views.background, backend)
     images = [start_views.composited(v) for v in range(len(views.cameras))]
-    feats = [extractor(_to_nchw(image)) for image in images]
+    backdrop = start_views.object_colour() if config.object_backdrop else views.background
+    feats = [extractor(_to_nchw(start_views.composited(v, backdrop))) for v in range(len(images))]
     masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:]), fraction=config.cell_coverage)
              for v in range(len(feats))]
     groups: list[torch.Tensor | None] = [None] * len(feats)
@@ -272,7 +285,7 @@ def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtract
         pixel_groups = depth_groups(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
         groups = [cell_groups(pixel_groups[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
     levels = frequency_levels(images, masks)
-    return [ViewTargets(cam, image, f, m, g, level)
+    return [ViewTargets(cam, image, backdrop, f, m, g, level)
             for cam, image, f, m, g, level in zip(views.cameras, images, feats, masks, groups, levels)]
 
 
@@ -548,7 +561,7 @@ def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: l
     """The paper's metrics on the run's views, and texture match of the colour-transferred start
     (whose features are the content targets already computed for the ``used`` views)."""
     from .lpips import load_lpips
-    from .metrics import evaluate, texture_match
+    from .metrics import covered_features, evaluate, texture_match
 
     bg, cams = content.background, content.cameras
     stylised = render_views(result, cams, bg, config.backend)
@@ -560,9 +573,9 @@ def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: l
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
                        lpips=lpips, extractor=extractor, bank_features=bank.features)
-    # the metric's own covered cells (as for the result), whatever cells the texture loss counted
-    start_features = torch.cat([t.content_features[0].flatten(1).T[covered_cells(
-        alpha, tuple(t.content_features.shape[-2:])).flatten()] for t, alpha in zip(targets, used.alphas)])
+    # the metric's own covered cells and background (as for the result), whatever the texture loss used
+    start_features = torch.cat([covered_features(extractor, t.content_image, alpha)
+                                for t, alpha in zip(targets, used.alphas)])
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 

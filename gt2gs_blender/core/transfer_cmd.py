@@ -50,6 +50,9 @@ def add_transfer_arguments(p: argparse.ArgumentParser) -> None:
                    help="how many times smaller the texture shows on the farthest depth group than on the nearest: "
                         "0 = as perspective shows it, measured from the views (the paper; default), at most 2; "
                         "1-16 fixed (the paper's code always uses 2)")
+    p.add_argument("--object-backdrop", action="store_true", default=None,
+                   help="stylise the object over its own mean colour, not the background, so the texture does not "
+                        "trace its outline (dark rims; with --stylise-geometry, halos of splats); weaker texture")
     p.add_argument("--angle", type=float, metavar="DEG",
                    help="orientation control: the texture's angle in the first view, degrees counter-clockwise")
     p.add_argument("--no-gt2", dest="gt2", action="store_false", default=None,
@@ -92,7 +95,8 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     return preset(
         args.preset, stylise_steps=args.steps, resolution=args.resolution, texture_height=args.texture_height,
         seed=args.seed, weights_path=str(weights) if weights else None, color_transfer=args.color_transfer,
-        depth_groups=args.depth_groups, depth_ratio=args.depth_ratio, background=tuple(args.background), backend=args.backend,
+        depth_groups=args.depth_groups, depth_ratio=args.depth_ratio, object_backdrop=args.object_backdrop,
+        background=tuple(args.background), backend=args.backend,
         device=args.device, n_views=getattr(args, "views", None), angle=args.angle, gt2=args.gt2, afcm=args.afcm,
         gpb=args.gpb, stylise_geometry=args.stylise_geometry, densify=args.densify, skip_hidden=args.skip_hidden,
         plateau_window=args.plateau_window, match_channels=args.match_channels, mixed_precision=args.mixed_precision,

@@ -78,6 +78,10 @@ class GT2GS_PG_settings(bpy.types.PropertyGroup):
                                description="How many times smaller the texture shows on the farthest surfaces than "
                                            "on the nearest (below 1: as perspective shows it, measured from the "
                                            "views, at most 2; the paper's code always uses 2)")
+    object_backdrop: BoolProperty(name="Object Backdrop", default=False,
+                                  description="Stylise the object over its own mean colour, not the background, "
+                                              "so the texture does not trace its outline (dark rims; with Texture "
+                                              "Moves Splats, halos of splats); the texture comes out weaker")
     gt2: BoolProperty(name="GT² Loss", default=True,
                       description="Carry the texture's orientation from view to view (off: plain NNFM matching)")
     afcm: BoolProperty(name="Adaptive Control", default=True,

@@ -160,7 +160,7 @@ class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
         settings = context.scene.gt2gs
         column = self.layout.column()
         for name in ("steps", "resolution", "n_angles", "texture_size", "seed", "color_transfer", "depth_groups",
-                     "depth_ratio", "gt2", "afcm", "gpb", "stylise_geometry", "densify"):
+                     "depth_ratio", "object_backdrop", "gt2", "afcm", "gpb", "stylise_geometry", "densify"):
             column.prop(settings, name)
 
 

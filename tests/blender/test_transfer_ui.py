@@ -276,13 +276,13 @@ def test_panel_settings_and_keywords_become_the_job_config(fresh):
     preset, config = transfer_run.config_overrides(fresh.context, {})
     assert preset == "fast" and config["device"] == "auto" and config["angle"] == 0.0
     assert not {"stylise_steps", "resolution", "n_angles", "texture_height", "gt2", "gpb", "stylise_geometry",
-                "depth_ratio", "weights_path", "threads"} & set(config)
+                "depth_ratio", "object_backdrop", "weights_path", "threads"} & set(config)
     settings.steps, settings.gpb, settings.device, settings.angle, settings.texture_size = 12, False, "CPU", 15.0, 96
-    settings.stylise_geometry, settings.depth_ratio = True, 2.0
+    settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = True, 2.0, True
     preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
     assert preset == "preview" and config["angle"] == -30.0 and config["stylise_steps"] == 12
     assert config["gpb"] is False and config["device"] == "cpu" and config["texture_height"] == 96
-    assert config["stylise_geometry"] is True and config["depth_ratio"] == 2.0
+    assert config["stylise_geometry"] is True and config["depth_ratio"] == 2.0 and config["object_backdrop"] is True
     from gt2gs_blender.core.config import preset as make_preset
 
     assert make_preset(preset, **config).gpb is False  # every key is a TransferConfig field
