@@ -5,9 +5,9 @@ Stylise phase: the DC colours learn (with ``stylise_geometry``, as in the author
 too, under the texture loss and the scale regulariser). Views are visited in the GT² order; each view's feature
 cells get targets from the texture bank guided by the prior angles carried from the previous view
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
-Stylise renders show the object over a backdrop of its own mean colour (``object_backdrop``): over the
-background, a cell on the outline would match a texture edge running along it, which the texture
-loss then paints (a dark rim, a halo of splats) differently in every view.
+With ``object_backdrop`` the stylise renders show the object over its own mean colour: over the
+background, a cell on the outline matches a texture edge running along it, which the texture loss
+then paints (a dark rim, a halo of splats) differently in every view.
 Without GT² (``gt2`` off) the targets are plain NNFM's: the nearest cell of the texture's own feature map.
 In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
 Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and

@@ -559,7 +559,7 @@ def _without_rest(scene: GaussianScene, rows: torch.Tensor) -> GaussianScene:
 def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: list[ViewTargets], bank: TextureBank,
               extractor: FeatureExtractor, config: TransferConfig) -> dict:
     """The paper's metrics on the run's views, and texture match of the colour-transferred start
-    (whose features are the content targets already computed for the ``used`` views)."""
+    (the content images of the ``used`` views, over the background as the result is measured)."""
     from .lpips import load_lpips
     from .metrics import covered_features, evaluate, texture_match
 
