@@ -102,7 +102,7 @@ class ViewSet:
     def object_colour(self, min_alpha: float = OBJECT_ALPHA) -> torch.Tensor:
         """Mean colour (3,) of the pixels the object covers (alpha above ``min_alpha``) in all views;
         the background colour when it covers none."""
-        colours = [(p / a[..., None])[a > min_alpha] for p, a in zip(self.premultiplied, self.alphas)]
+        colours = [p[a > min_alpha] / a[a > min_alpha][:, None] for p, a in zip(self.premultiplied, self.alphas)]
         covered = torch.cat(colours) if colours else torch.zeros(0, 3)
         return covered.mean(0).clamp(0.0, 1.0) if len(covered) else self.background.clone()
 
