@@ -39,17 +39,20 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.cameras import Camera, auto_views, camera_path, load_views  # noqa: E402
-from gt2gs_blender.core.config import preset  # noqa: E402
-from gt2gs_blender.core.gt2 import view_order  # noqa: E402
-from gt2gs_blender.core.lpips import LPIPS, load_lpips  # noqa: E402
-from gt2gs_blender.core.metrics import LONG_RANGE, SHORT_RANGE, consistency  # noqa: E402
-from gt2gs_blender.core.fit import FitConfig, fit_llff  # noqa: E402
-from gt2gs_blender.core.ply import read_ply  # noqa: E402
-from gt2gs_blender.core.rasterizer import render  # noqa: E402
-from gt2gs_blender.core.scene import GaussianScene  # noqa: E402
-from gt2gs_blender.core.texture import load_texture  # noqa: E402
-from gt2gs_blender.core.transfer import fit_cameras, transfer  # noqa: E402
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.cameras.generate import auto_views, camera_path
+from gt2gs_blender.core.cameras.files import load_views  # noqa: E402
+from gt2gs_blender.core.transfer.config import preset  # noqa: E402
+from gt2gs_blender.core.transfer.gt2 import view_order  # noqa: E402
+from gt2gs_blender.core.features.lpips import LPIPS, load_lpips  # noqa: E402
+from gt2gs_blender.core.transfer.metrics import LONG_RANGE, SHORT_RANGE, consistency  # noqa: E402
+from gt2gs_blender.core.fit.trainer import FitConfig, fit_llff  # noqa: E402
+from gt2gs_blender.core.scene.ply import read_ply  # noqa: E402
+from gt2gs_blender.core.render import render  # noqa: E402
+from gt2gs_blender.core.scene.gaussians import GaussianScene  # noqa: E402
+from gt2gs_blender.core.transfer.texture import load_texture  # noqa: E402
+from gt2gs_blender.core.transfer.views import fit_cameras
+from gt2gs_blender.core.transfer.pipeline import transfer  # noqa: E402
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"

@@ -32,7 +32,8 @@ import torch  # noqa: E402
 
 import gt2gs_blender  # noqa: E402
 from gt2gs_blender.blender import splats  # noqa: E402
-from gt2gs_blender.core.ply import read_ply, write_ply  # noqa: E402
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
 from common import random_scene  # noqa: E402
 
 

@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.scene import GaussianScene  # noqa: E402
+from gt2gs_blender.core.scene.gaussians import GaussianScene  # noqa: E402
 
 
 def random_scene(n: int, degree: int = 3, seed: int = 0) -> GaussianScene:

@@ -18,8 +18,9 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.densify import DensifyConfig  # noqa: E402
-from gt2gs_blender.core.fit import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, TextProgress, fit_llff  # noqa: E402
+from gt2gs_blender.core.train.densify import DensifyConfig  # noqa: E402
+from gt2gs_blender.app.progress import TerminalProgress  # noqa: E402
+from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, fit_llff  # noqa: E402
 
 FERN = ROOT.parent / "shared" / "data" / "scenes" / "fern_llff"
 
@@ -41,7 +42,7 @@ def main() -> None:
     out = ROOT / "bench" / "out"
     load_before = os.getloadavg()
     report = fit_llff(FERN, out / "fit_fern", config=config, n_points=args.points, sh_degree=args.sh_degree,
-                      progress=TextProgress())
+                      progress=TerminalProgress("fit"))
     result = {**dataclasses.asdict(report), "load_before": load_before, "load_after": os.getloadavg(),
               "args": vars(args)}
     (out / "fit_fern.json").write_text(json.dumps(result, indent=1))

@@ -18,7 +18,8 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from gt2gs_blender.core.ply import read_ply, write_ply  # noqa: E402
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
 from common import random_scene  # noqa: E402
 
 

@@ -55,7 +55,7 @@ def rss_mib() -> float:
 def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
     """Measure one configuration in this process (called in a subprocess)."""
 
-    from gt2gs_blender.core.rasterizer import rasterization
+    from gt2gs_blender.core.render import rasterization
 
     params, viewmats, ks = make_scene(n, res)
     params = [p.requires_grad_(True) for p in params]
@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import torch
 
-    from gt2gs_blender.core.rasterizer import available_backends
+    from gt2gs_blender.core.render import available_backends
 
     backends = available_backends("cuda" if torch.cuda.is_available() else "cpu")
     if torch.cuda.is_available():

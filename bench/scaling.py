@@ -34,21 +34,17 @@ import numpy as np
 import torch
 
 from bench.common import random_scene
-from gt2gs_blender.core.cameras import auto_views
-from gt2gs_blender.core.config import preset
-from gt2gs_blender.core.features import load_feature_extractor
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.stylise import Styliser, order_and_link
-from gt2gs_blender.core.texture import load_texture
-from gt2gs_blender.core.texture_bank import build_texture_bank
-from gt2gs_blender.core.transfer import (
-    BANK_MAX_CROP,
-    contributions,
-    hidden_gaussians,
-    render_views,
-    view_targets,
-)
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.config import preset
+from gt2gs_blender.core.features.extractor import load_feature_extractor
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.stylise import Styliser, order_and_link
+from gt2gs_blender.core.transfer.texture import load_texture
+from gt2gs_blender.core.transfer.texture_bank import build_texture_bank
+from gt2gs_blender.core.transfer.bank import BANK_MAX_CROP
+from gt2gs_blender.core.transfer.content import contributions, hidden_gaussians
+from gt2gs_blender.core.transfer.views import render_views, view_targets
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"

@@ -30,11 +30,13 @@ sys.path.insert(0, str(ROOT))
 
 import torch
 
-from gt2gs_blender.core.cameras import auto_views
-from gt2gs_blender.core.config import preset
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.rasterizer import available_backends
-from gt2gs_blender.core.transfer import clear_caches, render_views, transfer
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.config import preset
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.render import available_backends
+from gt2gs_blender.core.transfer.content import clear_caches
+from gt2gs_blender.core.transfer.views import render_views
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"

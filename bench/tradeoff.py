@@ -29,9 +29,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from gt2gs_blender.core.config import PRESETS, preset
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.transfer import transfer
+from gt2gs_blender.core.transfer.config import PRESETS, preset
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"

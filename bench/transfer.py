@@ -25,10 +25,10 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.config import TransferConfig, preset
-from gt2gs_blender.core.metrics import peak_memory_mib
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.transfer import transfer
+from gt2gs_blender.core.transfer.config import TransferConfig, preset
+from gt2gs_blender.core.transfer.metrics import peak_memory_mib
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"

@@ -1,6 +1,6 @@
-"""``python -m gt2gs_blender``: the command line (see core/cli.py)."""
+"""``python -m gt2gs_blender``: the command line (see app/cli/main.py)."""
 import sys
 
-from .core.cli import main
+from .app.cli.main import main
 
 sys.exit(main())

@@ -6,14 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.afcm import (
-    AFCMWeights,
-    afcm_weight,
-    block_dct,
-    depth_level,
-    high_frequency_energy,
-    normalise_frequency,
-)
+from gt2gs_blender.core.transfer.afcm import AFCMWeights, afcm_weight, block_dct, depth_level, high_frequency_energy, normalise_frequency
 
 
 def opencv_block_dct(gray: np.ndarray, block: int = 8) -> np.ndarray:

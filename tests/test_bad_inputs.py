@@ -24,17 +24,23 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core import atomic, cli
-from gt2gs_blender.core.cameras import MAX_IMAGE_SIDE, Camera, load_cameras_json, load_views, save_cameras_json
-from gt2gs_blender.core.color_transfer import apply_to_scene, fit_color_transform
-from gt2gs_blender.core.config import TransferConfig
+from gt2gs_blender.core import atomic
+from gt2gs_blender.app.cli import main as cli
+from gt2gs_blender.app.cli.demo import torus_scene
+from gt2gs_blender.core.cameras.camera import MAX_IMAGE_SIDE, Camera
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
+from gt2gs_blender.core.cameras.files import load_views
+from gt2gs_blender.core.transfer.color_transfer import apply_to_scene, fit_color_transform
+from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.errors import CameraFileError, InputFileError, PlyFormatError
-from gt2gs_blender.core.ply import read_ply, read_ply_arrays, read_ply_header, write_ply
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.texture import MAX_SIDE, load_texture
-from gt2gs_blender.core.transfer import transfer
-from gt2gs_blender.core.visibility import require_visible
+from gt2gs_blender.core.scene.ply import read_ply, read_ply_arrays
+from gt2gs_blender.core.scene.ply_header import read_ply_header
+from gt2gs_blender.core.scene.ply_write import write_ply
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture
+from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.visibility import require_visible
 
 from .test_cameras import COLMAP_CAMERAS, colmap_images, write_colmap_binary, write_colmap_text
 from .test_ply import MUTATION, core_names, mutate, random_columns, raw_ply
@@ -384,7 +390,7 @@ def test_constant_texture_and_constant_scene_colour_transfer_stays_finite(tmp_pa
     grey = [torch.full((24, 24, 3), 0.5), torch.full((24, 24, 3), 0.5)]
     matrix, offset = fit_color_transform(grey, texture, weights=[torch.ones(24, 24), torch.zeros(24, 24)])
     assert torch.isfinite(matrix).all() and torch.isfinite(offset).all()
-    scene = cli.torus_scene(n_major=8, n_minor=4)
+    scene = torus_scene(n_major=8, n_minor=4)
     recoloured = apply_to_scene(scene, matrix, offset)
     assert torch.allclose(recoloured.base_colors, torch.tensor([220, 120, 20]) / 255.0 * torch.ones(1, 3), atol=1e-5)
 
@@ -400,7 +406,7 @@ def tiny_config(tmp_path: Path) -> TransferConfig:
 @pytest.fixture
 def inputs(tmp_path: Path) -> tuple[Path, Path]:
     scene_path = tmp_path / "scene.ply"
-    write_ply(scene_path, cli.torus_scene(n_major=24, n_minor=12))
+    write_ply(scene_path, torus_scene(n_major=24, n_minor=12))
     y, x = np.mgrid[0:96, 0:96]
     texture_path = encode(tmp_path / "stripes.png", np.dstack([(x + y) % 32 * 8, x * 2, y * 2]).astype(np.uint8))
     return scene_path, texture_path
@@ -492,7 +498,7 @@ def test_cli_drop_invalid_reports_the_dropped_count(tmp_path, capsys):
 @pytest.mark.parametrize("case", ["integer-beyond-float", "nested-too-deeply", "image-too-large"])
 def test_cli_bad_cameras_json_is_a_user_error(tmp_path, capsys, case):
     scene = tmp_path / "s.ply"
-    write_ply(scene, cli.torus_scene(n_major=8, n_minor=4))
+    write_ply(scene, torus_scene(n_major=8, n_minor=4))
     cams = tmp_path / "cameras.json"
     cams.write_bytes(BAD_CAMERA_FILES["cameras.json"][case][0])
     code, _, err = cli_run(capsys, "render", str(scene), "--cameras", str(cams), "-o", str(tmp_path / "o"))
@@ -502,7 +508,7 @@ def test_cli_bad_cameras_json_is_a_user_error(tmp_path, capsys, case):
 @pytest.mark.parametrize("data", [exr_bytes(), grey_png(40000, 30000, bytes(100))])
 def test_cli_undecodable_texture_is_a_user_error(tmp_path, capsys, data):
     scene = tmp_path / "s.ply"
-    write_ply(scene, cli.torus_scene(n_major=8, n_minor=4))
+    write_ply(scene, torus_scene(n_major=8, n_minor=4))
     texture = tmp_path / "t.exr"
     texture.write_bytes(data)
     code, _, err = cli_run(capsys, "transfer", str(scene), str(texture), "-o", str(tmp_path / "o.ply"))
@@ -563,7 +569,7 @@ def test_cli_transfer_with_cameras_that_see_nothing_is_one_error_naming_the_file
 
 
 def test_one_gaussian_seen_by_the_last_camera_is_enough(tmp_path):
-    scene = cli.torus_scene(n_major=24, n_minor=12)
+    scene = torus_scene(n_major=24, n_minor=12)
     one = scene.subset(torch.arange(len(scene)) == 5)
     corner = cameras_at(1.0, [tuple(float(v) for v in one.means[0] + torch.tensor([0.2, 0.2, -3.0]))])
     cameras = BLIND_CAMERAS["looking-away"] + corner

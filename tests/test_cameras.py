@@ -18,13 +18,14 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core.cameras import (
-    camera_path,
-    Camera, LLFFData, arc_views, auto_views, estimate_up_axis, load_cameras_json, load_colmap,
-    load_colmap_points, load_llff, load_views, look_at, orbit_views, save_cameras_json, stack_cameras,
-)
+from gt2gs_blender.core.cameras.generate import camera_path, arc_views, auto_views, estimate_up_axis, look_at, orbit_views
+from gt2gs_blender.core.cameras.camera import Camera, stack_cameras
+from gt2gs_blender.core.cameras.llff import LLFFData, load_llff
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
+from gt2gs_blender.core.cameras.colmap import load_colmap, load_colmap_points
+from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.errors import CameraFileError
-from gt2gs_blender.core.scene import GaussianScene
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 FERN = SHARED / "data" / "scenes" / "fern_llff"

@@ -1,4 +1,4 @@
-"""Tests for the command line (core.cli): info, render, demo and the error contract.
+"""Tests for the command line (app/cli): info, render, demo and the error contract.
 
 Most run ``main([...])`` in-process on small generated scenes, rendering with the portable torch
 backend (no compiler needed) except the demo and default-backend tests, which use the automatic
@@ -18,9 +18,13 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core import cli
-from gt2gs_blender.core.cameras import auto_views, load_cameras_json, save_cameras_json
-from gt2gs_blender.core.ply import read_ply, write_ply
+from gt2gs_blender.app.cli import demo, info
+from gt2gs_blender.app.cli import main as cli
+from gt2gs_blender.app.cli.demo import torus_scene
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.ply_write import write_ply
 
 from .test_worker import OUT_OF_MEMORY, address_space_cap, needs_prlimit
 
@@ -33,7 +37,7 @@ PORTABLE = ["--backend", "torch", "--device", "cpu"]
 def small_ply(tmp_path: Path) -> Path:
     """A 1,200-Gaussian torus written as a 3DGS PLY."""
     path = tmp_path / "torus.ply"
-    write_ply(path, cli.torus_scene(n_major=40, n_minor=30))
+    write_ply(path, torus_scene(n_major=40, n_minor=30))
     return path
 
 
@@ -194,7 +198,7 @@ def test_internal_error_exit_code_1(capsys, small_ply, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(cli, "read_ply", broken)
+    monkeypatch.setattr(info, "read_ply", broken)
     code, _, err = run(capsys, "info", str(small_ply))
     assert code == 1
     assert_one_line_error(err, "internal error", "--debug", "boom")
@@ -229,8 +233,8 @@ def test_demo_on_a_given_scene(capsys, small_ply, tmp_path):
 
 
 def test_demo_generates_a_torus_without_shared(capsys, tmp_path, monkeypatch):
-    monkeypatch.setattr(cli, "SHARED_DONUT", tmp_path / "absent.ply")
-    monkeypatch.setattr(cli.transfer_cmd, "DEMO_TEXTURE", tmp_path / "absent.jpg")
+    monkeypatch.setattr(demo, "SHARED_DONUT", tmp_path / "absent.ply")
+    monkeypatch.setattr(demo, "DEMO_TEXTURE", tmp_path / "absent.jpg")
     code, out, err = run(capsys, "demo", "--out", str(tmp_path / "d"), *DEMO_FAST)
     assert code == 0, err
     assert "generated torus" in out and "generated stripes" in out

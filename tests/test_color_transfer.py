@@ -7,14 +7,10 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import orbit_views
-from gt2gs_blender.core.color_transfer import (
-    apply_to_images,
-    apply_to_scene,
-    fit_color_transform,
-)
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import SH_C0, GaussianScene
+from gt2gs_blender.core.cameras.generate import orbit_views
+from gt2gs_blender.core.transfer.color_transfer import apply_to_images, apply_to_scene, fit_color_transform
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import SH_C0, GaussianScene
 
 
 def _coloured_pixels(n: int, mix: np.ndarray, mean: np.ndarray, seed: int) -> np.ndarray:

@@ -9,12 +9,10 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core.densify import (
-    DensifyConfig, DensityStats, apply_structure, densify_and_prune, reset_opacity,
-)
-from gt2gs_blender.core.optim import PARAM_NAMES, GaussianAdam
-from gt2gs_blender.core.rasterizer.projection import Projection
-from gt2gs_blender.core.scene import GaussianScene
+from gt2gs_blender.core.train.densify import DensifyConfig, DensityStats, apply_structure, densify_and_prune, reset_opacity
+from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam
+from gt2gs_blender.core.render.projection import Projection
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 EXTENT = 2.0
 CONFIG = DensifyConfig()

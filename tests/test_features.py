@@ -7,18 +7,11 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from gt2gs_blender.core import weights as weights_mod
+from gt2gs_blender.core.features import weights as weights_mod
 from gt2gs_blender.core.errors import GT2GSError, InputFileError
-from gt2gs_blender.core.features import (
-    VGG16_RELU3,
-    VGG19_NORM_RELU3,
-    FeatureExtractor,
-    build_layers,
-    load_feature_extractor,
-    mixed_precision_dtype,
-    random_init_,
-)
-from gt2gs_blender.core.weights import ENV_VAR, ResolvedWeights, resolve_weights
+from gt2gs_blender.core.features.specs import VGG16_RELU3, VGG19_NORM_RELU3
+from gt2gs_blender.core.features.extractor import FeatureExtractor, build_layers, load_feature_extractor, mixed_precision_dtype, random_init_
+from gt2gs_blender.core.features.weights import ENV_VAR, ResolvedWeights, resolve_weights
 
 from .test_ssim import fern_rgb
 

@@ -7,17 +7,18 @@ import math
 import pytest
 import torch
 
-from gt2gs_blender.core import cli
-from gt2gs_blender.core.cameras import load_cameras_json, load_llff, orbit_views
-from gt2gs_blender.core.densify import DensifyConfig
-from gt2gs_blender.core.fit import (
-    FitConfig, Trainer, evaluate, llff_split, load_images, reconstruction_loss,
-)
-from gt2gs_blender.core.init import frustum_points, knn_scales, scene_from_points
-from gt2gs_blender.core.optim import PARAM_NAMES, GaussianAdam, LearningRates, exponential_decay
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import GaussianScene, quats_to_rotmats
+from gt2gs_blender.app.cli import main as cli
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
+from gt2gs_blender.core.cameras.llff import load_llff
+from gt2gs_blender.core.cameras.generate import orbit_views
+from gt2gs_blender.core.train.densify import DensifyConfig
+from gt2gs_blender.core.fit.trainer import FitConfig, Trainer, evaluate, llff_split, load_images
+from gt2gs_blender.core.train.reconstruction import reconstruction_loss
+from gt2gs_blender.core.fit.init import frustum_points, knn_scales, scene_from_points
+from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam, LearningRates, exponential_decay
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
 
 FAST_LRS = LearningRates(means=3e-3, means_final=3e-4, quats=1e-2, log_scales=1e-2, sh_dc=1e-2)
 """Learning rates for tiny synthetic fits (3DGS's are tuned for 30k steps)."""

@@ -8,20 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import Camera
-from gt2gs_blender.core.gt2 import (
-    Match,
-    angle_distance,
-    distortion,
-    fit_linear_maps,
-    match_with_prior,
-    prior_link,
-    rotation_angle,
-    view_order,
-)
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.texture_bank import TextureBank
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.transfer.gt2 import Match, angle_distance, distortion, fit_linear_maps, match_with_prior, prior_link, rotation_angle, view_order
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.texture_bank import TextureBank
 
 SIZE = 96
 FOCAL = 80.0
@@ -136,7 +127,7 @@ def test_occluded_cells_get_no_prior():
     blocker = GaussianScene.from_activated(blocker.means * torch.tensor([0.15, 0.6, 0.0]) + torch.tensor([0.9, 0.0, 1.0]),
                                            blocker.scales * 0.3, torch.full((len(blocker),), 0.99),
                                            torch.zeros(len(blocker), 3))
-    from gt2gs_blender.core.scene import concat
+    from gt2gs_blender.core.scene.gaussians import concat
 
     cam0, cam1 = camera(shift=(0.5, 0.0)), camera(shift=(-0.5, 0.0))
     both = concat([far, blocker])

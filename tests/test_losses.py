@@ -6,16 +6,9 @@ import math
 import pytest
 import torch
 
-from gt2gs_blender.core.gt2 import match_with_prior
-from gt2gs_blender.core.losses import (
-    anisotropy,
-    content_loss,
-    cosine_distance,
-    nearest_features,
-    scale_regulariser,
-    tv_loss,
-)
-from gt2gs_blender.core.texture_bank import TextureBank
+from gt2gs_blender.core.transfer.gt2 import match_with_prior
+from gt2gs_blender.core.transfer.losses import anisotropy, content_loss, cosine_distance, nearest_features, scale_regulariser, tv_loss
+from gt2gs_blender.core.transfer.texture_bank import TextureBank
 
 
 def _brute_nnfm(feats: torch.Tensor, bank: torch.Tensor, groups=None, bank_groups=None):

@@ -8,8 +8,8 @@ import pytest
 import torch
 
 from gt2gs_blender.core.errors import GT2GSError
-from gt2gs_blender.core.lpips import load_lpips
-from gt2gs_blender.core.weights import ENV_VAR
+from gt2gs_blender.core.features.lpips import load_lpips
+from gt2gs_blender.core.features.weights import ENV_VAR
 
 from .conftest import SHARED
 from .test_ssim import PAIRS, fern_rgb  # the recipes of metric_refs.json

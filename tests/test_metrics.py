@@ -5,13 +5,14 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core import metrics
-from gt2gs_blender.core.cameras import Camera
-from gt2gs_blender.core.features import VGG19_NORM_RELU3, FeatureExtractor
-from gt2gs_blender.core.lpips import load_lpips
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.weights import ResolvedWeights
+from gt2gs_blender.core.transfer import metrics
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
+from gt2gs_blender.core.features.extractor import FeatureExtractor
+from gt2gs_blender.core.features.lpips import load_lpips
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.features.weights import ResolvedWeights
 
 from .conftest import SHARED
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import look_at
-from gt2gs_blender.core.orientation_preview import orientation_preview, texture_layer
-from gt2gs_blender.core.scene import GaussianScene
+from gt2gs_blender.core.cameras.generate import look_at
+from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, texture_layer
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 
 def wall(n_side: int = 60, tilt: float = 0.0) -> GaussianScene:

@@ -1,4 +1,4 @@
-"""Tests of INRIA 3DGS PLY reading and writing (gt2gs_blender.core.ply).
+"""Tests of INRIA 3DGS PLY reading and writing (gt2gs_blender.core.scene).
 
 Oracles are independent of the module: a real INRIA file parsed by hand with numpy, and test files
 built by a small numpy/struct writer below (``raw_ply``) with hand-written type codes.
@@ -16,10 +16,12 @@ import pytest
 import torch
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from gt2gs_blender.core import ply
+from gt2gs_blender.core.scene import ply
 from gt2gs_blender.core.errors import PlyFormatError
-from gt2gs_blender.core.ply import read_ply, read_ply_header, write_ply
-from gt2gs_blender.core.scene import GaussianScene
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.ply_header import PlyProperty, read_ply_header
+from gt2gs_blender.core.scene.ply_write import write_ply
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -320,7 +322,7 @@ def test_other_elements_are_parsed_and_skipped(tmp_path):
         path.write_bytes(raw_ply(props, columns, fmt, before=(face_header, face), after=(edge_header, edge)))
         header = read_ply_header(path)
         assert [(el.name, el.count) for el in header.elements] == [("face", 2), ("vertex", 5), ("edge", 1)]
-        assert header.elements[0].properties[0] == ply.PlyProperty("vertex_indices", "int", "uchar")
+        assert header.elements[0].properties[0] == PlyProperty("vertex_indices", "int", "uchar")
         scene = read_ply(path)
         np.testing.assert_array_equal(scene.sh_dc[:, 1].numpy(), columns["f_dc_1"])
         np.testing.assert_array_equal(scene.extras["nx"], columns["nx"])

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import auto_views
-from gt2gs_blender.core.ply import read_ply
-from gt2gs_blender.core.rasterizer import available_backends, gsplat_backend, rasterization, render
-from gt2gs_blender.core.scene import quats_to_rotmats
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.render import available_backends, rasterization, render
+from gt2gs_blender.core.render import gsplat_backend
+from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
 
 from .reference import render_reference, support_radius
 
@@ -183,7 +184,7 @@ def test_float32_gradients_match_float64(backend):
 def test_torch_backend_small_chunks_match_reference(monkeypatch, loop_max):
     """Chunks of 2 entries (hundreds of pixels stopping at T < 1e-4 inside and across chunks), scanned
     with slice loops or with torch.cumprod/cumsum: reference images, and the default chunking's gradients."""
-    from gt2gs_blender.core.rasterizer import torch_backend
+    from gt2gs_blender.core.render import torch_backend
 
     gaussians = random_gaussians(300, 3, seed=6, spread=0.5)
     viewmats, ks = two_cameras()
@@ -284,7 +285,7 @@ def test_kernel_build_failure_falls_back_with_reason(tmp_path):
     """No usable compiler: the cpu backend is reported unavailable with a reason and auto picks torch."""
     code = (
         "import logging; logging.basicConfig(level=logging.WARNING)\n"
-        "from gt2gs_blender.core.rasterizer import available_backends, cpu_backend\n"
+        "from gt2gs_blender.core.render import available_backends, cpu_backend\n"
         "print(available_backends('cpu')); print('reason:', cpu_backend.unavailable_reason())\n"
     )
     env = dict(os.environ, CXX=str(tmp_path / "no-such-compiler"), GT2GS_BUILD_DIR=str(tmp_path / "build"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from gt2gs_blender.core.scene import SH_C0, GaussianScene, concat
+from gt2gs_blender.core.scene.gaussians import SH_C0, GaussianScene, concat
 
 
 def scene_with_extras(n: int = 5, degree: int = 2) -> GaussianScene:

@@ -10,31 +10,15 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from gt2gs_blender.core.cameras import auto_views
-from gt2gs_blender.core.config import TransferConfig
-from gt2gs_blender.core.gt2 import match_with_prior
-from gt2gs_blender.core.skips import (
-    Plateau,
-    angles_for,
-    near_duplicates,
-    redundant_views,
-    texture_anisotropy,
-    used_sh_degree,
-)
-from gt2gs_blender.core.texture_bank import (
-    TextureBank,
-    build_texture_bank,
-    compact_bank,
-)
-from gt2gs_blender.core.transfer import (
-    CACHE_ENV,
-    _cache_dir,
-    _content_and_hidden,
-    bank_angle_count,
-    clear_caches,
-    render_views,
-    transfer,
-)
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.gt2 import match_with_prior
+from gt2gs_blender.core.transfer.skips import Plateau, angles_for, near_duplicates, redundant_views, texture_anisotropy, used_sh_degree
+from gt2gs_blender.core.transfer.texture_bank import TextureBank, build_texture_bank, compact_bank
+from gt2gs_blender.core.transfer.bank import CACHE_ENV, cache_dir, bank_angle_count
+from gt2gs_blender.core.transfer.content import content_and_hidden, clear_caches
+from gt2gs_blender.core.transfer.views import render_views
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 from .test_transfer import blob_scene, stripes, tiny
 
@@ -203,11 +187,11 @@ def test_bank_cache_hit_is_identical_and_a_changed_texture_misses(tmp_path) -> N
 
 def test_cache_folder_from_config_env_or_home(tmp_path, monkeypatch) -> None:
     monkeypatch.setenv(CACHE_ENV, str(tmp_path / "env"))
-    assert _cache_dir(TransferConfig()) == tmp_path / "env"
-    assert _cache_dir(TransferConfig(cache_dir=str(tmp_path / "cfg"))) == tmp_path / "cfg"
-    assert _cache_dir(TransferConfig(bank_cache=False)) is None
+    assert cache_dir(TransferConfig()) == tmp_path / "env"
+    assert cache_dir(TransferConfig(cache_dir=str(tmp_path / "cfg"))) == tmp_path / "cfg"
+    assert cache_dir(TransferConfig(bank_cache=False)) is None
     monkeypatch.delenv(CACHE_ENV)
-    assert _cache_dir(TransferConfig()).parts[-3:] == (".cache", "gt2gs_blender", "banks")
+    assert cache_dir(TransferConfig()).parts[-3:] == (".cache", "gt2gs_blender", "banks")
 
 
 def test_content_cache_reuses_renders_for_the_same_scene_and_views_only() -> None:
@@ -215,12 +199,12 @@ def test_content_cache_reuses_renders_for_the_same_scene_and_views_only() -> Non
     scene = blob_scene()
     cameras = auto_views(scene, 2, width=32, height=32)
     config = TransferConfig()
-    first = _content_and_hidden(scene, cameras, torch.ones(3), config)
-    assert _content_and_hidden(scene.clone(), cameras, torch.ones(3), config)[0] is first[0]
+    first = content_and_hidden(scene, cameras, torch.ones(3), config)
+    assert content_and_hidden(scene.clone(), cameras, torch.ones(3), config)[0] is first[0]
     moved = scene.clone()
     moved.means[0, 0] += 0.01
-    assert _content_and_hidden(moved, cameras, torch.ones(3), config)[0] is not first[0]
-    assert _content_and_hidden(scene, cameras, torch.ones(3), TransferConfig(reuse_content=False))[0] \
+    assert content_and_hidden(moved, cameras, torch.ones(3), config)[0] is not first[0]
+    assert content_and_hidden(scene, cameras, torch.ones(3), TransferConfig(reuse_content=False))[0] \
         is not first[0]
     clear_caches()
 

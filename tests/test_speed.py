@@ -10,17 +10,14 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from gt2gs_blender.core import stylise as stylise_module
-from gt2gs_blender.core.cameras import auto_views
-from gt2gs_blender.core.gt2 import angle_distance, match_with_prior
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.texture_bank import TextureBank
-from gt2gs_blender.core.transfer import (
-    contributions,
-    fit_cameras,
-    hidden_gaussians,
-    transfer,
-)
+from gt2gs_blender.core.transfer import stylise as stylise_module
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.gt2 import angle_distance, match_with_prior
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.texture_bank import TextureBank
+from gt2gs_blender.core.transfer.content import contributions, hidden_gaussians
+from gt2gs_blender.core.transfer.views import fit_cameras
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 from .test_transfer import blob_scene, stripes, tiny
 
@@ -87,7 +84,7 @@ def wall_scene() -> GaussianScene:
 
 
 def test_contributions_are_tiny_behind_an_opaque_wall_and_large_in_front() -> None:
-    from gt2gs_blender.core.cameras import Camera
+    from gt2gs_blender.core.cameras.camera import Camera
 
     scene = wall_scene()
     viewmat = np.eye(4)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.ssim import gaussian_window, ssim, ssim_map
+from gt2gs_blender.core.train.ssim import gaussian_window, ssim, ssim_map
 
 PAIRS = {
     "image000_vs_image001": lambda a, b: b,

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import Camera
-from gt2gs_blender.core.densify import DensifyConfig, DensityStats, densify_and_prune
-from gt2gs_blender.core.fit import FitConfig, Trainer
-from gt2gs_blender.core.optim import BACKOFF_AFTER, PARAM_NAMES, GaussianAdam, StepGuard
-from gt2gs_blender.core.rasterizer import available_backends, render
-from gt2gs_blender.core.scene import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.train.densify import DensifyConfig, DensityStats, densify_and_prune
+from gt2gs_blender.core.fit.trainer import FitConfig, Trainer
+from gt2gs_blender.core.train.optim import BACKOFF_AFTER, PARAM_NAMES, GaussianAdam, StepGuard
+from gt2gs_blender.core.render import available_backends, render
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
 
 from .reference import render_reference
 
@@ -249,7 +249,7 @@ def test_repeated_non_finite_steps_are_logged_and_halve_the_learning_rate(caplog
     lr = 1e-2
     opt = GaussianAdam(small_scene(), dict.fromkeys(PARAM_NAMES, lr))
     before = {k: v.detach().clone() for k, v in opt.scene.tensors().items()}
-    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.optim"):
+    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.train.optim"):
         for i in range(BACKOFF_AFTER):
             set_grads(opt, math.nan if i % 2 == 0 else math.inf)
             assert not opt.step()
@@ -299,7 +299,7 @@ def test_a_fit_with_non_finite_losses_never_writes_nan_into_the_scene(caplog):
     images[1, 5, 7] = math.nan  # one corrupt training pixel: that view's loss is NaN every time
     start = replace(target, sh_dc=target.sh_dc + 0.5)
     trainer = Trainer(start, cameras, images, FitConfig(iterations=9, densify_until=0, backend="torch"), extent=1.0)
-    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.optim"):
+    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.train.optim"):
         scene = trainer.run()
     assert trainer.opt.skipped == 3 and trainer.opt.steps == 6  # each of the 3 views is drawn 3 times
     assert len([r for r in caplog.records if "step skipped" in r.getMessage()]) == 3
@@ -335,7 +335,7 @@ def test_densifying_absurd_scales_keeps_every_value_finite(percent_dense, caplog
     before = {k: v.detach().clone() for k, v in opt.scene.tensors().items()}
     stats = DensityStats(len(rows))
     stats.grad_sum[:], stats.count[:] = 1.0, 1  # every Gaussian is due to grow
-    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.densify"):
+    with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.train.densify"):
         report = densify_and_prune(opt, stats, DensifyConfig(percent_dense=percent_dense), 1.0, prune_large=False,
                                    generator=torch.Generator().manual_seed(0))
     for name, t in opt.scene.tensors().items():

@@ -8,16 +8,19 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import Camera, auto_views
-from gt2gs_blender.core.config import TransferConfig
-from gt2gs_blender.core.features import VGG19_NORM_RELU3, FeatureExtractor
-from gt2gs_blender.core.losses import anisotropy
-from gt2gs_blender.core.rasterizer import render
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.stylise import GEOMETRY, Styliser
-from gt2gs_blender.core.texture_bank import build_texture_bank
-from gt2gs_blender.core.transfer import render_views, transfer, view_targets
-from gt2gs_blender.core.weights import ResolvedWeights
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
+from gt2gs_blender.core.features.extractor import FeatureExtractor
+from gt2gs_blender.core.transfer.losses import anisotropy
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.stylise import GEOMETRY, Styliser
+from gt2gs_blender.core.transfer.texture_bank import build_texture_bank
+from gt2gs_blender.core.transfer.views import render_views, view_targets
+from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.features.weights import ResolvedWeights
 
 from .test_transfer import blob_scene, stripes, tiny
 

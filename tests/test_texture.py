@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from gt2gs_blender.core.errors import InputFileError
-from gt2gs_blender.core.texture import load_texture
+from gt2gs_blender.core.transfer.texture import load_texture
 
 
 def _rgb_pattern(height: int = 80, width: int = 96) -> np.ndarray:

@@ -10,17 +10,7 @@ import torch
 import torch.nn.functional as F
 
 from gt2gs_blender.core.errors import GT2GSError
-from gt2gs_blender.core.texture_bank import (
-    bank_scales,
-    build_texture_bank,
-    cell_groups,
-    covered_cells,
-    crop_side,
-    depth_groups,
-    feature_map_bank,
-    group_depth_ratio,
-    rotate_crop,
-)
+from gt2gs_blender.core.transfer.texture_bank import bank_scales, build_texture_bank, cell_groups, covered_cells, crop_side, depth_groups, feature_map_bank, group_depth_ratio, rotate_crop
 
 
 class OrientedEnergy(torch.nn.Module):

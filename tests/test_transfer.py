@@ -5,9 +5,12 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.config import PRESETS, TransferConfig, preset
-from gt2gs_blender.core.scene import GaussianScene
-from gt2gs_blender.core.transfer import Cancelled, ViewSet, bank_depth_ratio, transfer
+from gt2gs_blender.core.transfer.config import PRESETS, TransferConfig, preset
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.progress import Cancelled
+from gt2gs_blender.core.transfer.views import ViewSet
+from gt2gs_blender.core.transfer.bank import bank_depth_ratio
+from gt2gs_blender.core.transfer.pipeline import transfer
 
 
 def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
@@ -126,7 +129,7 @@ def test_fast_preset_on_the_shared_donut(shared, tmp_path):
 
     texture_match (covered cells only) falls by at least 30 % from the colour-transferred start and
     the content stays recognisable (SSIM to the original renders >= 0.3)."""
-    from gt2gs_blender.core.ply import read_ply
+    from gt2gs_blender.core.scene.ply import read_ply
 
     scene = read_ply(shared / "data" / "scenes" / "donut" / "point_cloud.ply")
     config = preset("fast", weights_path=str(shared / "weights"), cache_dir=str(tmp_path / "banks"))

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras import Camera
-from gt2gs_blender.core.warp import backproject, expected_depth, pixel_centres, reproject, warp_image
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.cameras.warp import backproject, expected_depth, pixel_centres, reproject, warp_image
 
 W, H = 64, 48
 NORMAL, OFFSET = np.array([0.1, -0.05, 1.0]) / np.linalg.norm([0.1, -0.05, 1.0]), 4.0  # world plane n.X = d

@@ -16,11 +16,13 @@ import numpy as np
 import pytest
 
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
-from gt2gs_blender.core import deps
-from gt2gs_blender.core.cameras import save_cameras_json
-from gt2gs_blender.core.ply import read_ply_arrays, write_ply
+from gt2gs_blender.app import deps
+from gt2gs_blender.core.cameras.cameras_json import save_cameras_json
+from gt2gs_blender.core.scene.ply import read_ply_arrays
+from gt2gs_blender.core.scene.ply_write import write_ply
 from gt2gs_blender.core.errors import MEMORY_ADVICE
-from gt2gs_blender.core.worker import EXIT_INPUT, EXIT_MEMORY, JobSpec, write_png
+from gt2gs_blender.app.protocol import EXIT_INPUT, EXIT_MEMORY, JobSpec
+from gt2gs_blender.app.images import write_png
 
 from .test_bad_inputs import BLIND_CAMERAS
 from .test_transfer import blob_scene, stripes
@@ -44,7 +46,7 @@ needs_prlimit = pytest.mark.skipif(not hasattr(resource, "prlimit") or not Path(
 def address_space_cap() -> int:
     """Bytes of address space for a capped worker: what a fresh Python takes once torch and the
     engine are loaded (as the worker will have them), plus HEADROOM."""
-    probe = ("import pathlib, gt2gs_blender.core.transfer, gt2gs_blender.core.visibility; "
+    probe = ("import pathlib, gt2gs_blender.core.transfer.pipeline, gt2gs_blender.core.transfer.visibility; "
              "print(next(l.split()[1] for l in pathlib.Path('/proc/self/status').read_text().splitlines() "
              "if l.startswith('VmSize:')))")
     result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120,
@@ -211,7 +213,7 @@ def test_job_spec_rejects_malformed_files(tmp_path):
 
 
 def test_worker_command_line_exit_status(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "gt2gs_blender.core.worker", str(tmp_path / "none.json")],
+    result = subprocess.run([sys.executable, "-m", "gt2gs_blender.app.worker", str(tmp_path / "none.json")],
                             capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert result.returncode == EXIT_INPUT
     (event,) = [json.loads(line) for line in result.stdout.splitlines()]

@@ -1,7 +1,7 @@
 """A worker process seen from Blender: start it, poll it without blocking, cancel it, clean up after it.
 
 bpy-free (plain subprocess and threads), so the modal operator, the headless operator and tests
-drive the same object. The worker (``core/worker.py``) runs under ``sys.executable`` - Blender's
+drive the same object. The worker (``app/worker.py``) runs under ``sys.executable`` - Blender's
 own Python inside Blender - with the extension's dependency folder first on ``PYTHONPATH``. Its
 JSON-line events are read by a thread into a queue, so ``poll()`` never waits on the pipe. Every
 file of a job lives in one temporary folder, removed by ``cleanup()`` once the process has ended.
@@ -24,12 +24,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..core.deps import worker_pythonpath
+from ..app.deps import worker_pythonpath
 from ..core.errors import MEMORY_ADVICE
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 """The extension's package folder; the worker is imported from its parent under the same name."""
-WORKER_MODULE = f"{PACKAGE_DIR.name}.core.worker"
+WORKER_MODULE = f"{PACKAGE_DIR.name}.app.worker"
 CANCEL_GRACE_S = 5.0
 """How long a cancelled worker may take to stop by itself before it is killed."""
 STDERR_LINES = 40

@@ -317,7 +317,7 @@ def object_to_scene(obj, *, bake_transform: bool = False):
     With ``bake_transform`` the object's world matrix is baked into the Gaussians (see ``transform``);
     otherwise they stay in the object's local space, exactly as stored.
     """
-    from ..core.ply import SplatArrays
+    from ..core.scene.ply import SplatArrays
 
     if not is_splat_object(obj):
         raise SplatObjectError(f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "

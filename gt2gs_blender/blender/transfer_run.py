@@ -220,7 +220,7 @@ class TransferRun:
         settings = context.scene.gt2gs
         job = Job(deps_dir=addon.deps_dir())
         try:
-            from ..core.ply import write_ply
+            from ..core.scene.ply_write import write_ply
 
             scene, _ = splats.object_to_scene(obj)
             write_ply(job.path("input.ply"), scene)
@@ -282,7 +282,7 @@ class TransferRun:
 
 def apply_result(context, object_name: str, path: str, mode: str):
     """Add the result PLY as a new splat object beside the source, or swap it into the source (in place)."""
-    from ..core.ply import read_ply_arrays
+    from ..core.scene.ply import read_ply_arrays
 
     source = bpy.data.objects.get(object_name)
     if source is None or not splats.is_splat_object(source):

@@ -13,7 +13,7 @@ import tempfile
 import bpy
 
 from ..blender import addon
-from ..core import deps
+from ..app import deps
 
 POLL_S = 0.5
 

@@ -74,7 +74,7 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
             return {"CANCELLED"}
         try:
             from ..core.errors import GT2GSError
-            from ..core.ply import write_ply
+            from ..core.scene.ply_write import write_ply
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}

@@ -52,7 +52,8 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             return {"CANCELLED"}
         try:
             from ..core.errors import GT2GSError
-            from ..core.ply import read_ply_arrays, read_ply_header
+            from ..core.scene.ply import read_ply_arrays
+            from ..core.scene.ply_header import read_ply_header
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}

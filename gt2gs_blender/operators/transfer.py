@@ -15,7 +15,7 @@ from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ..blender import transfer_run
 from ..blender.job import DONE
-from ..core.config import PRESETS
+from ..core.transfer.config import PRESETS
 
 TIMER_S = 0.25
 HEADLESS_TICK_S = 0.1

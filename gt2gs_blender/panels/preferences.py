@@ -5,7 +5,7 @@ import bpy
 from bpy.props import EnumProperty, IntProperty, StringProperty
 
 from ..blender import addon
-from ..core import deps
+from ..app import deps
 from ..operators import dependencies
 
 

@@ -5,7 +5,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ..blender import splats
-from ..core.config import PRESETS, TransferConfig
+from ..core.transfer.config import PRESETS, TransferConfig
 
 DEFAULTS = TransferConfig()
 

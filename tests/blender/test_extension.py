@@ -53,9 +53,9 @@ def test_build_ships_the_package_and_nothing_else(built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
     assert built_zip.name == "gt2gs_blender-0.1.0.zip"
     for required in ("blender_manifest.toml", "__init__.py", "operators/io_import.py", "operators/io_export.py",
-                     "operators/transfer.py", "core/worker.py", "batch.py",
-                     "panels/sidebar.py", "blender/splats.py", "core/ply.py",
-                     "core/rasterizer/csrc/raster_cpu.cpp"):  # the C++ source is compiled at run time
+                     "operators/transfer.py", "app/worker.py", "batch.py",
+                     "panels/sidebar.py", "blender/splats.py", "core/scene/ply.py",
+                     "core/render/csrc/raster_cpu.cpp"):  # the C++ source is compiled at run time
         assert required in names, required
     leaked = [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".o", ".so")) or
               any(part.startswith(".") for part in n.split("/"))]
@@ -68,7 +68,7 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
     repo.mkdir()
     run_tool("install-files", "--local-dir", str(repo), "--blender-version", BLENDER_VERSION, str(built_zip))
     assert (repo / "gt2gs_blender" / "blender_manifest.toml").is_file()
-    assert (repo / "gt2gs_blender" / "core" / "rasterizer" / "csrc" / "raster_cpu.cpp").is_file()
+    assert (repo / "gt2gs_blender" / "core" / "render" / "csrc" / "raster_cpu.cpp").is_file()
 
     script = textwrap.dedent(f"""
         import json, sys
@@ -96,7 +96,7 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
             bpy.ops.gt2gs.import_ply(filepath=donut)
             obj = bpy.context.active_object
             report["imported"] = [obj.type, len(obj.data.points)]
-            report["engine_module"] = [m for m in sys.modules if m.endswith("gt2gs_blender.core.ply")]
+            report["engine_module"] = [m for m in sys.modules if m.endswith("gt2gs_blender.core.scene.ply")]
             # the worker process runs from the installed copy (its folder on the worker's PYTHONPATH): given
             # a "texture" that is no image, it gets as far as decoding it (a real run would also compile
             # the installed copy's C++ rasterizer, minutes on a busy machine)
@@ -123,7 +123,7 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
     assert report["job_threads"] == 3 and report["job_threads_default"] == "unset"
     if DONUT.is_file():
         assert report["imported"] == ["POINTCLOUD", DONUT_COUNT]
-        assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.ply"]
+        assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.scene.ply"]
         assert "point_cloud.ply" in report["worker_error"] and "texture" in report["worker_error"]
     assert report["disabled"]
     assert report["after_disable"] == [False, False]

@@ -20,9 +20,9 @@ bpy = pytest.importorskip("bpy")
 torch = pytest.importorskip("torch")
 
 from gt2gs_blender.blender import splats, transform  # noqa: E402
-from gt2gs_blender.core.ply import write_ply  # noqa: E402
-from gt2gs_blender.core.rasterizer.sh import eval_sh, sh_basis  # noqa: E402
-from gt2gs_blender.core.scene import GaussianScene, quats_to_rotmats  # noqa: E402
+from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
+from gt2gs_blender.core.render.sh import eval_sh, sh_basis  # noqa: E402
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats  # noqa: E402
 
 from .conftest import DONUT_COUNT  # noqa: E402
 

@@ -18,11 +18,11 @@ bpy = pytest.importorskip("bpy")
 
 from gt2gs_blender.blender import splats, transfer_run, views  # noqa: E402
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus  # noqa: E402
-from gt2gs_blender.core import deps  # noqa: E402
-from gt2gs_blender.core.cameras import load_cameras_json  # noqa: E402
+from gt2gs_blender.app import deps  # noqa: E402
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json  # noqa: E402
 from gt2gs_blender.core.errors import MEMORY_ADVICE  # noqa: E402
-from gt2gs_blender.core.ply import write_ply  # noqa: E402
-from gt2gs_blender.core.worker import write_png  # noqa: E402
+from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
+from gt2gs_blender.app.images import write_png  # noqa: E402
 from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view  # noqa: E402
 
 from ..test_transfer import blob_scene, stripes  # noqa: E402
@@ -283,7 +283,7 @@ def test_panel_settings_and_keywords_become_the_job_config(fresh):
     assert preset == "preview" and config["angle"] == -30.0 and config["stylise_steps"] == 12
     assert config["gpb"] is False and config["device"] == "cpu" and config["texture_height"] == 96
     assert config["stylise_geometry"] is True and config["depth_ratio"] == 2.0 and config["object_backdrop"] is True
-    from gt2gs_blender.core.config import preset as make_preset
+    from gt2gs_blender.core.transfer.config import preset as make_preset
 
     assert make_preset(preset, **config).gpb is False  # every key is a TransferConfig field
 

@@ -1,0 +1,1 @@
+"""The command line, ``python -m gt2gs_blender``: one module per command, ``main`` in ``main.py``."""

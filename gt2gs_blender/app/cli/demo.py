@@ -1,0 +1,92 @@
+"""``demo`` (what ``make demo`` runs): the shared donut and a shared texture, or generated stand-ins
+when ``../shared`` is absent. The only code that knows where the project's shared data lives."""
+from __future__ import annotations
+import os
+from ...core.features.weights import ENV_VAR
+from ..jobs import run_transfer, summary, write_before_after
+from ..progress import TerminalProgress
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+import numpy as np
+import torch
+from ...core.scene.ply import read_ply
+from ...core.transfer.texture import load_texture
+from ...core.scene.gaussians import GaussianScene
+from . import transfer as transfer_cmd
+from .args import _positive_int, _render_options, _scene_options
+
+
+SHARED = Path(__file__).resolve().parents[3].parent / "shared"
+"""The project's shared data beside the checkout (development and CI); absent in an installed product."""
+SHARED_DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
+DEMO_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
+SHARED_WEIGHTS = SHARED / "weights"
+
+
+def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
+    p = commands.add_parser(
+        "demo", parents=[debug, _scene_options(), _render_options()],
+        help="texture-transfer the demo scene (what `make demo` runs)",
+        description="Re-texture the shared donut scene with a shared texture (or a generated torus and "
+                    "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "
+                    "DIR/report.json.")
+    p.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
+                   help="output folder (default: out/demo)")
+    p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="use this scene instead of the donut")
+    p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
+    p.add_argument("--views", type=_positive_int, metavar="N", help="number of automatic views (default: the preset's)")
+    transfer_cmd.add_transfer_arguments(p)
+    p.set_defaults(run=cmd_demo)
+
+
+def cmd_demo(args: argparse.Namespace) -> None:
+    """Texture-transfer the demo scene and write the stylised PLY, a before/after strip and the report."""
+    scene, source = _demo_scene(args.scene, args.drop_invalid)
+    texture = args.texture or (DEMO_TEXTURE if DEMO_TEXTURE.is_file() else None)
+    print(f"scene: {source} ({len(scene):,} Gaussians)")
+    print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
+    image = stripes_texture() if texture is None else load_texture(texture)
+    if args.weights is None and not os.environ.get(ENV_VAR) and SHARED_WEIGHTS.is_dir():
+        args.weights = SHARED_WEIGHTS
+    config = transfer_cmd.config_from_args(args)
+    args.out.mkdir(parents=True, exist_ok=True)
+    with TerminalProgress("demo") as bar:
+        result = run_transfer(scene, image, None, config, args.out / "stylised.ply", report=args.out / "report.json",
+                              progress=bar, scene_name=source)
+    write_before_after(args.out / "before_after.png", scene, result.scene, image)
+    print(summary(result.report))
+    print(f"wrote {args.out / 'stylised.ply'}, {args.out / 'before_after.png'} and {args.out / 'report.json'}")
+
+
+def stripes_texture(size: int = 256, period: int = 24) -> np.ndarray:
+    """A generated two-colour diagonal stripe texture (the demo's texture when ../shared is absent)."""
+    y, x = np.mgrid[0:size, 0:size]
+    band = (((x + y) // (period // 2)) % 2).astype(np.float32)[..., None]
+    return band * np.array([0.85, 0.35, 0.1], np.float32) + (1 - band) * np.array([0.95, 0.9, 0.75], np.float32)
+
+
+def _demo_scene(path: Path | None, drop_invalid: bool) -> tuple[GaussianScene, str]:
+    """The scene to show: the given file, else the shared donut, else a generated torus."""
+    if path is not None:
+        return read_ply(path, drop_invalid=drop_invalid), str(path)
+    if SHARED_DONUT.is_file():
+        return read_ply(SHARED_DONUT, drop_invalid=drop_invalid), str(SHARED_DONUT)
+    return torus_scene(), f"a generated torus (the shared donut is not at {SHARED_DONUT})"
+
+
+def torus_scene(n_major: int = 200, n_minor: int = 100, major: float = 1.0, minor: float = 0.4) -> GaussianScene:
+    """A procedural torus around +z: n_major x n_minor isotropic Gaussians on a grid, coloured with a
+    hue ring around the torus and a checker, so that views differ visibly. Deterministic."""
+    u = torch.arange(n_major, dtype=torch.float32) * (2 * math.pi / n_major)
+    v = torch.arange(n_minor, dtype=torch.float32) * (2 * math.pi / n_minor)
+    uu, vv = (t.reshape(-1) for t in torch.meshgrid(u, v, indexing="ij"))
+    ring = major + minor * torch.cos(vv)
+    means = torch.stack([ring * torch.cos(uu), ring * torch.sin(uu), minor * torch.sin(vv)], dim=1)
+    spacing = max(2 * math.pi * (major + minor) / n_major, 2 * math.pi * minor / n_minor)
+    hue = 0.5 + 0.5 * torch.cos(uu[:, None] + torch.tensor([0.0, 2.1, 4.2]))
+    checker = ((uu * 12 / math.pi).floor() + (vv * 6 / math.pi).floor()) % 2
+    colors = hue * (0.55 + 0.45 * checker[:, None])
+    n = len(uu)
+    return GaussianScene.from_activated(means, torch.full((n, 3), 0.6 * spacing), torch.full((n,), 0.9), colors)

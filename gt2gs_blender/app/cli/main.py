@@ -1,0 +1,103 @@
+"""The command line, ``python -m gt2gs_blender``: inspect a 3DGS PLY, render it, run the demo, fit one.
+
+Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line
+on stderr and exit with 2; any other exception is a bug, also reported in one line, with exit code
+1; ``--debug`` adds the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
+"""
+from __future__ import annotations
+import argparse
+import contextlib
+import logging
+import sys
+import traceback
+import warnings
+from typing import Iterator, Sequence
+from ...core.errors import GT2GSError, out_of_memory_message
+from . import transfer as transfer_cmd
+from .info import _add_info
+from .render import _add_render
+from .demo import _add_demo
+from .fit import _add_fit
+
+
+PROG = "gt2gs"
+
+
+EXIT_INTERNAL, EXIT_USER = 1, 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit status (0 success, 2 user error, 1 internal error)."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help (0) or a usage error argparse already printed (2)
+        return exc.code if isinstance(exc.code, int) else EXIT_USER
+    with _reporting_to_stderr():
+        try:
+            args.run(args)
+        except KeyboardInterrupt:
+            return _fail(args.debug, "interrupted", 130)
+        except (GT2GSError, OSError, ValueError) as exc:
+            return _fail(args.debug, _user_message(exc), EXIT_USER)
+        except Exception as exc:  # out of memory (the user can ask for less), else a bug: one line unless --debug
+            memory = out_of_memory_message(exc)
+            if memory is not None:
+                return _fail(args.debug, memory, EXIT_USER)
+            hint = "" if args.debug else " (run with --debug for the traceback)"
+            return _fail(args.debug, f"internal error{hint}: {type(exc).__name__}: {exc}", EXIT_INTERNAL)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argparse tree: global --debug, then the info / render / demo subcommands."""
+    debug = argparse.ArgumentParser(add_help=False)
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                       help="print the traceback of errors")
+    parser = argparse.ArgumentParser(
+        prog="python -m gt2gs_blender", allow_abbrev=False,
+        description="GT²-GS texture transfer for 3D Gaussian Splatting: command-line tools.")
+    parser.add_argument("--debug", action="store_true", help="print the traceback of errors")
+    commands = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
+    _add_info(commands, debug)
+    _add_render(commands, debug)
+    _add_demo(commands, debug)
+    _add_fit(commands, debug)
+    transfer_cmd.add_transfer_command(commands, debug)
+    return parser
+
+
+def _user_message(exc: BaseException) -> str:
+    """One line for the user; OSErrors name their file."""
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        message = f"{exc.filename}: {exc.strerror}"
+    else:
+        message = str(exc) or type(exc).__name__
+    return " ".join(message.split())
+
+
+def _fail(debug: bool, message: str, code: int) -> int:
+    if debug:
+        traceback.print_exc()
+    print(f"{PROG}: error: {' '.join(message.split())}", file=sys.stderr)
+    return code
+
+
+@contextlib.contextmanager
+def _reporting_to_stderr() -> Iterator[None]:
+    """Show the engine's log warnings and Python warnings as one 'gt2gs: warning:' line each."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter(f"{PROG}: warning: %(message)s"))
+    handler.setLevel(logging.WARNING)
+    logger = logging.getLogger("gt2gs_blender")
+    logger.addHandler(handler)
+
+    def show(message: Warning | str, *_: object, **__: object) -> None:
+        print(f"{PROG}: warning: {message}", file=sys.stderr)
+
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = show
+            yield
+    finally:
+        logger.removeHandler(handler)

@@ -1,0 +1,105 @@
+"""One texture-transfer job, as the command line and the Blender worker both run it.
+
+Inputs are read and checked before any work starts (scene, texture, region, views that see the
+scene); the result PLY and the report are written atomically and only on success, so a failed or
+cancelled job leaves nothing behind. The front ends differ only in where progress goes and in what
+they print or send afterwards.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import cv2
+import numpy as np
+import torch
+
+from ..core.atomic import atomic_write
+from ..core.cameras.camera import Camera
+from ..core.cameras.generate import auto_views
+from ..core.errors import InputFileError
+from ..core.progress import ProgressCallback
+from ..core.render import render
+from ..core.scene.gaussians import GaussianScene
+from ..core.scene.ply_write import write_ply
+from ..core.transfer.config import TransferConfig
+from ..core.transfer.pipeline import TransferResult, transfer
+from ..core.transfer.texture import load_texture
+from ..core.transfer.visibility import require_visible
+from .images import write_png
+
+STRIP_VIEWS = 4
+STRIP_SIZE = 256
+
+
+def load_region(path: Path, n: int) -> np.ndarray:
+    """A region file: a .npy of Gaussian indices, or of n booleans (True = restyle)."""
+    try:
+        region = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputFileError(path, f"cannot read the region as a .npy array: {exc}") from exc
+    if region.dtype == np.bool_:
+        if region.shape != (n,):
+            raise InputFileError(path, f"a boolean region needs {n} entries (one per Gaussian), has {region.shape}")
+    elif not np.issubdtype(region.dtype, np.integer) or region.ndim != 1:
+        raise InputFileError(path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} "
+                                   f"{region.shape}")
+    return region
+
+
+def read_texture(path: Path) -> np.ndarray:
+    """The texture as (H,W,3) float32 in [0,1]: an image file, or pixels saved as .npy (Blender's images)."""
+    if path.suffix.lower() != ".npy":
+        return load_texture(path)
+    try:
+        image = np.load(path, allow_pickle=False)
+    except (OSError, ValueError) as exc:
+        raise InputFileError(path, f"cannot read the texture pixels ({exc})") from None
+    if image.ndim != 3 or image.shape[2] < 3 or not np.isfinite(image).all():
+        raise InputFileError(path, f"texture pixels must be a finite (H, W, 3) array, got {image.shape}")
+    return np.clip(image[..., :3], 0.0, 1.0).astype(np.float32)
+
+
+def run_transfer(scene: GaussianScene, texture: np.ndarray, views: Sequence[Camera] | int | None,
+                 config: TransferConfig, output: Path, *, report: Path | None = None,
+                 region: np.ndarray | None = None, progress: ProgressCallback | None = None,
+                 cancel: Callable[[], bool] | None = None, scene_name: str | os.PathLike = "the scene",
+                 views_name: str | None = None) -> TransferResult:
+    """Check that the views see the scene, re-texture it, write the result PLY (and the report).
+
+    ``scene_name`` and ``views_name`` are what an error calls the scene and the views (None: automatic).
+    """
+    require_visible(scene, views, config, scene_name, views_name, region)
+    result = transfer(scene, texture, views, config, region=region, progress=progress, cancel=cancel)
+    write_ply(output, result.scene)
+    if report is not None:
+        atomic_write(report, json.dumps(result.report, indent=1, default=str))
+    return result
+
+
+def summary(report: dict) -> str:
+    """A few lines: time per stage, the feature network (and a loud note on the fallback), the metrics."""
+    stages = ", ".join(f"{k} {v:.1f}s" for k, v in report["stage_seconds"].items())
+    lines = [f"done in {report['seconds']:.1f}s ({stages}); {report['n_gaussians']:,} Gaussians, "
+             f"{report['n_views']} views at {report['image_size'][0]}x{report['image_size'][1]}"]
+    weights = report["weights"]
+    lines.append(("WARNING, fallback features: " if weights["fallback"] else "features: ") + weights["reason"])
+    metrics = report.get("metrics")
+    if metrics:
+        lines.append("metrics: " + ", ".join(f"{k} {v:.4f}" for k, v in metrics.items() if v is not None))
+    return "\n".join(lines)
+
+
+@torch.no_grad()
+def write_before_after(path: Path, original: GaussianScene, stylised: GaussianScene, texture: np.ndarray) -> None:
+    """A PNG: the texture, then the original (top) and stylised (bottom) scene from 4 views."""
+    cams = auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0)
+    rows = [render(s, cams, background=(1.0, 1.0, 1.0)).colors.clamp(0, 1) for s in (original, stylised)]
+    tiles = [torch.cat(list(r), dim=1) for r in rows]
+    swatch = torch.from_numpy(cv2.resize(texture, (STRIP_SIZE, STRIP_SIZE), interpolation=cv2.INTER_AREA))
+    white = torch.ones_like(swatch)
+    image = torch.cat([torch.cat([swatch, tiles[0]], 1), torch.cat([white, tiles[1]], 1)], 0)
+    write_png(path, (image.numpy() * 255 + 0.5).astype(np.uint8))

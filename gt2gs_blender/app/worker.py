@@ -1,0 +1,168 @@
+"""The worker process: one texture transfer (or orientation preview) described by a JSON job file.
+
+``python -m gt2gs_blender.app.worker JOB.json`` runs it outside Blender (DESIGN §7: torch never
+loads into Blender, a crash cannot take Blender down, Cancel can always stop it). The job file:
+
+    {"kind": "transfer" | "preview", "input": "scene.ply", "texture": "texture.png" (or pixels.npy),
+     "views": "cameras.json" | 8 | null, "preset": "fast", "config": {TransferConfig overrides},
+     "region": "mask.npy" | null, "output": "out.ply" (preview: out.png), "report": "report.json",
+     "preview_dir": "previews", "cancel_file": "cancel", "preview_size": 256,
+     "input_name": "object 'Donut'", "views_name": "the scene's cameras"}
+
+``input_name`` / ``views_name`` are what error messages call the input and the views when the files
+are a caller's temporary exports (default: the file paths).
+
+Events go to stdout as JSON lines (stray prints of libraries are sent to stderr instead):
+``{"event": "progress", "stage", "step", "total", "fraction", "eta_s", "message", "preview"}`` (the
+preview is the path of a PNG frame, written atomically, or null), then exactly one of
+``{"event": "done", "output", "report"}``, ``{"event": "cancelled"}`` or
+``{"event": "error", "message"}``. Exit status: 0 done, 1 internal error, 2 unusable input,
+3 cancelled (a cancel file appeared or SIGTERM arrived), 4 out of memory (an allocation failed; the
+message says what to lower). Outputs are written atomically and only on success, so a cancelled or
+failed run leaves no result behind.
+"""
+from __future__ import annotations
+import os
+import signal
+import sys
+import traceback
+from pathlib import Path
+from typing import Any, Callable
+from ..core.errors import GT2GSError, out_of_memory_message
+from ..core.progress import Cancelled, Progress
+from .protocol import EXIT_CANCELLED, EXIT_DONE, EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, Events, JobSpec
+
+
+class CancelFlag:
+    """True once the cancel file exists or SIGTERM arrived; polled by the transfer between steps."""
+
+    def __init__(self, cancel_file: Path | None) -> None:
+        self.cancel_file = cancel_file
+        self.signalled = False
+
+    def on_signal(self, signum: int, frame: Any) -> None:
+        self.signalled = True
+
+    def __call__(self) -> bool:
+        return self.signalled or (self.cancel_file is not None and self.cancel_file.exists())
+
+
+def _views(spec: JobSpec):
+    if isinstance(spec.views, Path):
+        from ..core.cameras.files import load_views
+
+        return load_views(spec.views)
+    return spec.views
+
+
+def _config(spec: JobSpec):
+    from ..core.transfer.config import preset
+
+    overrides = dict(spec.config or {})
+    if isinstance(overrides.get("background"), list):
+        overrides["background"] = tuple(overrides["background"])
+    try:
+        return preset(spec.preset, **overrides)
+    except ValueError as exc:
+        raise GT2GSError(f"job settings: {exc}") from None
+
+
+def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
+    """Run the texture transfer (``jobs.run_transfer``), sending progress and preview frames as events."""
+    from ..core.scene.ply import read_ply
+    from .images import write_png
+    from .jobs import load_region, read_texture, run_transfer
+
+    scene = read_ply(spec.input)
+    texture, config, views = read_texture(spec.texture), _config(spec), _views(spec)
+    region = None if spec.region is None else load_region(spec.region, len(scene))
+    views_name = spec.views_name or (str(spec.views) if isinstance(spec.views, Path) else None)
+    if spec.preview_dir is not None:
+        spec.preview_dir.mkdir(parents=True, exist_ok=True)
+    frames = 0
+
+    def progress(p: Progress) -> None:
+        nonlocal frames
+        frame = None
+        if p.preview is not None and spec.preview_dir is not None:
+            frame = spec.preview_dir / f"preview_{frames:04d}.png"
+            write_png(frame, p.preview)
+            frames += 1
+        events("progress", stage=p.stage, step=p.step, total=p.total, fraction=p.fraction, eta_s=p.eta_s,
+               message=p.message, preview=None if frame is None else str(frame))
+
+    run_transfer(scene, texture, views, config, spec.output, report=spec.report, region=region, progress=progress,
+                 cancel=cancel, scene_name=spec.input_name or spec.input, views_name=views_name)
+    events("done", output=str(spec.output), report=None if spec.report is None else str(spec.report))
+
+
+def run_preview(spec: JobSpec, events: Events) -> None:
+    """Render the orientation preview of the first view as a PNG."""
+    from ..core.cameras.generate import auto_views
+    from ..core.transfer.orientation_preview import orientation_preview
+    from ..core.scene.ply import read_ply
+    from .images import write_png
+    from .jobs import read_texture
+
+    scene = read_ply(spec.input)
+    config = _config(spec)
+    views = _views(spec)
+    camera = views[0] if isinstance(views, list) else auto_views(scene, views or config.n_views, width=spec.preview_size,
+                                                                 height=spec.preview_size)[0]
+    image = orientation_preview(scene, read_texture(spec.texture), camera, config.angle, size=spec.preview_size,
+                                resolution=config.resolution, texture_height=config.texture_height,
+                                n_groups=config.n_scales if config.depth_groups else 1, depth_ratio=config.depth_ratio,
+                                background=config.background, backend=config.backend)
+    write_png(spec.output, image)
+    events("done", output=str(spec.output), report=None)
+
+
+def run(job_file: str | os.PathLike, events: Events) -> int:
+    """Run one job; report the outcome as an event and return the exit status."""
+    try:
+        spec = JobSpec.load(job_file)
+        cancel = CancelFlag(spec.cancel_file)
+        if hasattr(signal, "SIGTERM"):
+            signal.signal(signal.SIGTERM, cancel.on_signal)
+        if spec.kind == "transfer":
+            run_transfer(spec, events, cancel)
+        else:
+            run_preview(spec, events)
+        return EXIT_DONE
+    except GT2GSError as exc:
+        if isinstance(exc, Cancelled):
+            events("cancelled")
+            return EXIT_CANCELLED
+        events("error", message=str(exc))
+        return EXIT_INPUT
+    except ImportError as exc:
+        events("error", message=f"the Python package {exc.name or exc} is missing in the worker's Python: "
+                                "install the dependencies (add-on preferences, or pip install -r requirements.txt)")
+        return EXIT_INTERNAL
+    except Exception as exc:
+        traceback.print_exc()
+        memory = out_of_memory_message(exc)
+        if memory is not None:
+            events("error", message=memory)
+            return EXIT_MEMORY
+        events("error", message=f"internal error: {type(exc).__name__}: {exc}")
+        return EXIT_INTERNAL
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point: the event stream takes the real stdout; anything else printed goes to stderr."""
+    args = sys.argv[1:] if argv is None else argv
+    if len(args) != 1:
+        sys.stderr.write("usage: python -m gt2gs_blender.app.worker JOB.json\n")
+        return EXIT_INPUT
+    stream = os.fdopen(os.dup(sys.stdout.fileno()), "w", encoding="utf-8")
+    sys.stdout.flush()
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())
+    try:
+        return run(args[0], Events(stream))
+    finally:
+        stream.close()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

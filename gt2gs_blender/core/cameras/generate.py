@@ -1,0 +1,220 @@
+"""Generated views: rings and arcs fitted around a scene, look-at poses and smooth camera paths.
+
+GT^2 visits views in order and warps matches from one view to the next, so the generators return
+views ordered along their path (consecutive views are neighbours)."""
+from __future__ import annotations
+import math
+from typing import Callable, Sequence
+import numpy as np
+from ..scene.gaussians import GaussianScene
+from .camera import Camera
+
+
+# ---------------------------------------------------------------------------------------------------
+# Generated views
+# ---------------------------------------------------------------------------------------------------
+def look_at(
+    eye: Sequence[float], target: Sequence[float], *, width: int, height: int, fov_deg: float = 50.0,
+    up: Sequence[float] = (0.0, 0.0, 1.0), name: str = "",
+) -> Camera:
+    """A camera at ``eye`` looking at ``target`` with ``up`` pointing up in the image.
+
+    ``fov_deg`` is the horizontal field of view; pixels are square and the principal point centred.
+    """
+    if not 0.0 < fov_deg < 180.0:
+        raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg}")
+    eye_v, target_v = np.asarray(eye, dtype=np.float64), np.asarray(target, dtype=np.float64)
+    forward = _unit(target_v - eye_v, "look direction")
+    right = np.cross(forward, _unit(up, "up"))
+    if np.linalg.norm(right) < 1e-6:
+        raise ValueError("look_at: the view direction is parallel to the up vector")
+    right /= np.linalg.norm(right)
+    down = np.cross(forward, right)
+    f = (width / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
+    return Camera.from_cam_to_world(np.stack([right, down, forward], axis=1), eye_v, f, f,
+                                    width / 2.0, height / 2.0, width, height, name)
+
+
+def camera_path(cameras: Sequence[Camera], frames_per_gap: int, *, closed: bool = False) -> list[Camera]:
+    """A smooth path through ``cameras`` in their order, as a rendered video would go: ``frames_per_gap``
+    frames from each camera to the next (the camera itself first), rotation by slerp, centre linear,
+    intrinsics and size of the gap's first camera; ``closed`` adds the gap from the last back to the first,
+    else the last camera ends the path. Consecutive cameras must turn by less than 180 degrees."""
+    if frames_per_gap < 1 or not cameras:
+        raise ValueError(f"need cameras and frames_per_gap >= 1, got {len(cameras)} and {frames_per_gap}")
+    gaps = len(cameras) if closed and len(cameras) > 1 else len(cameras) - 1
+    path = []
+    for i in range(gaps):
+        a, b = cameras[i], cameras[(i + 1) % len(cameras)]
+        r_a = a.cam_to_world[:3, :3]
+        axis_angle = _rotation_log(r_a.T @ b.cam_to_world[:3, :3])
+        for k in range(frames_per_gap):
+            t = k / frames_per_gap
+            path.append(Camera.from_cam_to_world(r_a @ _rotation_exp(t * axis_angle), (1 - t) * a.center + t * b.center,
+                                                 a.fx, a.fy, a.cx, a.cy, a.width, a.height, f"{a.name}+{k}"))
+    return path if closed and len(cameras) > 1 else path + [cameras[-1]]
+
+
+def _rotation_log(r: np.ndarray) -> np.ndarray:
+    """Axis times angle (radians) of a rotation matrix with angle below 180 degrees."""
+    angle = math.acos(min(1.0, max(-1.0, (np.trace(r) - 1.0) / 2.0)))
+    if angle > math.pi - 1e-6:
+        raise ValueError("consecutive cameras turn by 180 degrees: the path between them is ambiguous")
+    skew = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]]) / 2.0
+    return skew if angle < 1e-12 else skew * angle / math.sin(angle)
+
+
+def _rotation_exp(w: np.ndarray) -> np.ndarray:
+    """Rotation matrix of axis times angle ``w`` (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    k = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    if angle < 1e-12:
+        return np.eye(3) + k
+    k /= angle
+    return np.eye(3) + math.sin(angle) * k + (1.0 - math.cos(angle)) * (k @ k)
+
+
+def orbit_views(
+    center: Sequence[float], radius: float, n: int, *, width: int, height: int, fov_deg: float = 50.0,
+    elevation_deg: float = 20.0, up: Sequence[float] = (0.0, 0.0, 1.0), front: Sequence[float] = (0.0, -1.0, 0.0),
+) -> list[Camera]:
+    """``n`` cameras on a ring around ``center`` looking at it, ordered by azimuth.
+
+    The ring lies ``elevation_deg`` above the plane normal to ``up``; the first camera sits on the
+    ``front`` side (Blender's front view by default: on -y, looking along +y) and azimuth increases
+    counter-clockwise seen from ``up``.
+    """
+    azimuths = np.linspace(0.0, 360.0, n, endpoint=False)
+    return _ring_views(center, radius, azimuths, elevation_deg, up, front, width, height, fov_deg, "orbit")
+
+
+def arc_views(
+    center: Sequence[float], radius: float, n: int, *, width: int, height: int, fov_deg: float = 50.0,
+    arc_deg: float = 60.0, elevation_deg: float = 10.0, up: Sequence[float] = (0.0, 0.0, 1.0),
+    front: Sequence[float] = (0.0, -1.0, 0.0),
+) -> list[Camera]:
+    """``n`` cameras on an arc of ``arc_deg`` degrees on the ``front`` side of ``center``, looking at
+    it and ordered along the arc: forward-facing views for front-facing scenes (like LLFF)."""
+    if not 0.0 <= arc_deg < 360.0:
+        raise ValueError(f"arc_deg must be in [0, 360), got {arc_deg}")
+    azimuths = np.linspace(-arc_deg / 2.0, arc_deg / 2.0, n) if n > 1 else np.zeros(n)
+    return _ring_views(center, radius, azimuths, elevation_deg, up, front, width, height, fov_deg, "arc")
+
+
+def _ring_views(
+    center: Sequence[float], radius: float, azimuths_deg: np.ndarray, elevation_deg: float,
+    up: Sequence[float], front: Sequence[float], width: int, height: int, fov_deg: float, prefix: str,
+) -> list[Camera]:
+    """Cameras at the given azimuths (0 = ``front``) and elevation on a sphere around ``center``."""
+    if len(azimuths_deg) < 1:
+        raise ValueError("at least one view is needed")
+    if not (math.isfinite(radius) and radius > 0):
+        raise ValueError(f"radius must be positive, got {radius}")
+    if not -90.0 < elevation_deg < 90.0:
+        raise ValueError(f"elevation_deg must be in (-90, 90), got {elevation_deg}")
+    up_v = _unit(up, "up")
+    e1 = _horizontal_direction(front, up_v)
+    e2 = np.cross(up_v, e1)
+    c = np.asarray(center, dtype=np.float64)
+    el = math.radians(elevation_deg)
+    cameras = []
+    for i, az in enumerate(np.radians(azimuths_deg)):
+        offset = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up_v
+        cameras.append(look_at(c + radius * offset, c, width=width, height=height, fov_deg=fov_deg,
+                               up=up_v, name=f"{prefix}_{i:03d}"))
+    return cameras
+
+
+def _horizontal_direction(front: Sequence[float], up: np.ndarray) -> np.ndarray:
+    """``front`` projected onto the plane normal to ``up``; if they are parallel, the world axis
+    least aligned with ``up`` (never parallel to it) projected instead."""
+    direction = np.asarray(front, dtype=np.float64)
+    flat = direction - (direction @ up) * up
+    if np.linalg.norm(flat) < 1e-6:
+        axis = np.eye(3)[np.argmin(np.abs(up))]
+        flat = axis - (axis @ up) * up
+    return flat / np.linalg.norm(flat)
+
+
+def _unit(v: Sequence[float], what: str) -> np.ndarray:
+    """``v`` normalised; ValueError if it is zero or not finite."""
+    arr = np.asarray(v, dtype=np.float64)
+    norm = np.linalg.norm(arr)
+    if arr.shape != (3,) or not math.isfinite(norm) or norm < 1e-12:
+        raise ValueError(f"{what} must be a finite non-zero 3-vector, got {arr.tolist()}")
+    return arr / norm
+
+
+def estimate_up_axis(
+    points: np.ndarray, prefer: Sequence[float] = (0.0, 0.0, 1.0), flatness: float = 0.5,
+) -> np.ndarray:
+    """The scene's up axis: the smallest-variance principal axis of ``points``.
+
+    Reliable for flat-ish scenes (ground planes, tabletop objects, a donut's symmetry axis); when
+    the smallest variance is not below ``flatness`` times the middle one no axis stands out and
+    ``prefer`` is returned. The sign is chosen to agree with ``prefer``.
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    prefer_v = _unit(prefer, "prefer")
+    if len(pts) < 3:
+        return prefer_v
+    variances, axes = np.linalg.eigh(np.cov(pts.T))
+    if not variances[0] < flatness * variances[1]:
+        return prefer_v
+    axis = axes[:, 0]
+    return axis if axis @ prefer_v >= 0 else -axis
+
+
+def auto_views(
+    scene: GaussianScene, n: int, *, width: int = 256, height: int = 256, kind: str = "auto",
+    fov_deg: float = 50.0, elevation_deg: float = 20.0, up: Sequence[float] | str = (0.0, 0.0, 1.0),
+    quantile: float = 0.98, margin: float = 1.1,
+) -> list[Camera]:
+    """Ordered views fitted to a scene when no cameras are given.
+
+    The Gaussians' robust bounds (``scene.bounds(quantile)``, ignoring floaters) give a box; the
+    camera distance is the smallest at which all eight box corners project inside every image,
+    times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
+    long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
+    forward-facing arc on the -y side, Blender's front) or "auto" (= orbit: a lone object has no
+    known front). ``up`` is a vector (world +z, Blender's convention, by default) or "auto" for
+    :func:`estimate_up_axis`.
+    """
+    if kind not in ("auto", "orbit", "arc"):
+        raise ValueError(f"kind must be 'auto', 'orbit' or 'arc', got {kind!r}")
+    if margin <= 0:
+        raise ValueError(f"margin must be positive, got {margin}")
+    lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
+    center = (lo + hi) / 2.0
+    sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
+    if isinstance(up, str):
+        if up != "auto":
+            raise ValueError(f"up must be a 3-vector or 'auto', got {up!r}")
+        means = scene.means.detach().double().cpu().numpy()
+        up = estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
+    fov_x = math.radians(fov_deg)
+    fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
+    make = arc_views if kind == "arc" else orbit_views
+
+    def views(radius: float) -> list[Camera]:
+        return make(center, radius, n, width=width, height=height, fov_deg=fov_deg,
+                    elevation_deg=elevation_deg, up=up)
+
+    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
+    return views(_fitting_radius(views, corners, sphere_radius, enclosing) * margin)
+
+
+def _fitting_radius(views: Callable[[float], list[Camera]], corners: np.ndarray, low: float, high: float) -> float:
+    """Smallest orbit radius in [low, high] at which every corner projects inside every view (bisection)."""
+    def inside(radius: float) -> bool:
+        for cam in views(radius):
+            uv, depth = cam.project(corners)
+            if np.any(depth <= 0) or np.any(uv < 0) or np.any(uv > [cam.width, cam.height]):
+                return False
+        return True
+
+    for _ in range(30):
+        mid = 0.5 * (low + high)
+        low, high = (low, mid) if inside(mid) else (mid, high)
+    return high

@@ -1,0 +1,76 @@
+"""The texture bank a run matches against: its angle count, depth ratio and on-disk cache folder."""
+from __future__ import annotations
+import os
+from pathlib import Path
+import numpy as np
+import torch
+from .config import MAX_DEPTH_RATIO, TransferConfig
+from ..features.extractor import FeatureExtractor
+from .skips import angles_for, texture_anisotropy
+from .texture_bank import TextureBank, build_texture_bank, feature_map_bank, group_depth_ratio
+from ..progress import Tracker
+from .views import ViewSet
+
+
+BANK_MAX_CROP = 64
+"""Texture crops are capped at 64 px: the kept centre cells are then identical (tested), 3-4x faster."""
+
+
+CACHE_ENV = "GT2GS_CACHE_DIR"
+"""Environment variable naming the texture-bank cache folder when the config gives none."""
+
+
+def cache_dir(config: TransferConfig) -> Path | None:
+    """The bank cache folder: the config's, else $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks;
+    None when ``bank_cache`` is off."""
+    if not config.bank_cache:
+        return None
+    if config.cache_dir:
+        return Path(config.cache_dir)
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    return Path.home() / ".cache" / "gt2gs_blender" / "banks"
+
+
+def bank_angle_count(texture: np.ndarray, config: TransferConfig) -> int:
+    """The bank's angle count: ``n_angles``, or with ``adaptive_angles`` fewer for a texture with
+    no strong local orientation (:func:`.skips.angles_for`)."""
+    if not config.adaptive_angles:
+        return config.n_angles
+    return angles_for(texture_anisotropy(texture), config.n_angles)
+
+
+def bank_depth_ratio(views: ViewSet, config: TransferConfig) -> float:
+    """The farthest over the nearest depth group's depth that the bank's scales follow: the configured
+    one, or the views' (all at once, as their groups), at most MAX_DEPTH_RATIO and rounded to 0.01 so
+    that near-identical view sets share a cached bank (a 0.4 % scale change at most)."""
+    if config.depth_ratio > 0.0:
+        return config.depth_ratio
+    measured = group_depth_ratio(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
+    return round(min(measured, MAX_DEPTH_RATIO), 2)
+
+
+def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig, device: torch.device,
+               tracker: Tracker, depth_ratio: float) -> TextureBank:
+    """The texture's feature bank at scale 1 (renders are halved before VGG, the texture is not), its
+    depth groups' scales spanning ``depth_ratio`` (paper §3.2: the group's texture shrinks as Z_1/Z_k)."""
+
+    def report(fraction: float) -> None:
+        tracker.check_cancel()
+        tracker.tell(int(fraction * 100), 100, "texture feature bank")
+
+    n_angles = bank_angle_count(texture, config)
+    return build_texture_bank(
+        texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
+        n_scales=config.n_scales, n_angles=n_angles, depth_ratio_range=(1.0, depth_ratio),
+        texture_height=config.texture_height,
+        max_crop=BANK_MAX_CROP, cache_dir=cache_dir(config), device=device, progress=report,
+        angle_offset=config.angle % (360.0 / n_angles),
+    ).to(device)
+
+
+def nnfm_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig,
+              device: torch.device) -> TextureBank:
+    """The plain NNFM loss's bank (``gt2`` off): the texture's own feature map at scale 1."""
+    return feature_map_bank(texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
+                            texture_height=config.texture_height, device=device).to(device)

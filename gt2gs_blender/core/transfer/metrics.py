@@ -1,0 +1,158 @@
+"""The paper's evaluation metrics, measured on a run's own views (paper Tab. 1 and the cost table).
+
+- ``ssim``: content preservation, SSIM of each stylised render vs the original render, mean over views.
+- ``st_*`` / ``lt_*``: multi-view consistency, short range (view i vs i+1) and long range (i vs i+7):
+  render i is warped into view j by rendered depth and the known poses (exact for our scenes, where
+  peers estimate optical flow), then compared with render j over valid pixels only (covered in
+  both views, not occluded, inside the source) by RMSE and LPIPS-Alex, averaged over pairs.
+- ``texture_match``: mean cosine distance of each rendered feature cell the object covers to its
+  nearest texture-bank feature (lower = closer to the texture; background cells are left out).
+- render FPS and peak memory.
+Images are channels-last (V,H,W,3) in [0, 1], as the rasterizer renders them.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections.abc import Sequence
+
+import torch
+
+from ..cameras.camera import Camera
+from ..features.extractor import FeatureExtractor
+from .losses import cosine_distance, nearest_features
+from ..features.lpips import LPIPS
+from ..render import render
+from ..scene.gaussians import GaussianScene
+from ..train.ssim import ssim
+from .texture_bank import covered_cells
+from ..cameras.warp import MIN_ALPHA, expected_depth, warp_image
+
+SHORT_RANGE = 1
+LONG_RANGE = 7
+BLOCK_BYTES = 64 * 2**20
+"""Largest similarity block texture_match builds at once."""
+
+
+@torch.no_grad()
+def content_ssim(stylised: torch.Tensor, original: torch.Tensor) -> float:
+    """Mean over views of SSIM(stylised render, original render), (V,H,W,3) each."""
+    return float(ssim(stylised, original).mean())
+
+
+@torch.no_grad()
+def consistency(
+    images: torch.Tensor,
+    depths: torch.Tensor,
+    alphas: torch.Tensor,
+    cameras: Sequence[Camera],
+    pairs_offset: int,
+    *,
+    lpips: LPIPS | None = None,
+    min_alpha: float = MIN_ALPHA,
+) -> dict[str, float | None]:
+    """Warped-render error over the pairs (i, i + ``pairs_offset``): ``{rmse, lpips}``, None without pairs.
+
+    ``depths`` are the rasterizer's sum T*alpha*z (divided by alpha here). RMSE is over valid pixels
+    and channels of each pair; a pair without a valid pixel is left out. LPIPS sees both images with invalid pixels set to 0 in both, so
+    masked areas add zero distance and dilute the mean by the invalid fraction (as in the peers'
+    masked LPIPS); ``lpips`` None skips it.
+    """
+    z = expected_depth(depths, alphas, min_alpha)
+    rmses, lpipses = [], []
+    for i in range(len(cameras) - pairs_offset):
+        j = i + pairs_offset
+        warp = warp_image(images[i], z[i], cameras[i], cameras[j], z[j], src_alpha=alphas[i], dst_alpha=alphas[j],
+                          min_alpha=min_alpha)
+        if not warp.valid.any():
+            continue
+        target = torch.where(warp.valid[..., None], images[j], torch.zeros_like(images[j]))
+        rmses.append(float((warp.image - target)[warp.valid].pow(2).mean().sqrt()))
+        if lpips is not None:
+            lpipses.append(float(lpips(*(x.permute(2, 0, 1)[None] for x in (warp.image, target)))))
+    return {"rmse": _mean(rmses), "lpips": _mean(lpipses)}
+
+
+def _mean(values: list[float]) -> float | None:
+    """Arithmetic mean, None for no values."""
+    return sum(values) / len(values) if values else None
+
+
+@torch.no_grad()
+def texture_match(features: torch.Tensor, bank_features: torch.Tensor, block_bytes: int = BLOCK_BYTES) -> float:
+    """Mean over rendered features (N,C) of the cosine distance to the nearest bank feature (M,C).
+
+    The same nearest-feature search as the NNFM loss, in blocks of at most ``block_bytes``.
+    """
+    if features.dim() != 2 or bank_features.dim() != 2 or features.shape[1] != bank_features.shape[1]:
+        shapes = f"{tuple(features.shape)}, {tuple(bank_features.shape)}"
+        raise ValueError(f"texture_match needs (N,C) and (M,C) features, got {shapes}")
+    nearest = nearest_features(features, bank_features, chunk_bytes=block_bytes)
+    return float(cosine_distance(features, bank_features[nearest].to(features)).mean())
+
+
+@torch.no_grad()
+def render_fps(scene: GaussianScene, cameras: Sequence[Camera], *, backend: str = "auto") -> float:
+    """Frames per second rendering each camera alone (colour and depth), after one warm-up frame."""
+    render(scene, cameras[:1], backend=backend)
+    _synchronize(scene.device)
+    start = time.perf_counter()
+    for camera in cameras:
+        render(scene, [camera], backend=backend)
+    _synchronize(scene.device)
+    return len(cameras) / (time.perf_counter() - start)
+
+
+def _synchronize(device: torch.device) -> None:
+    """Wait for queued GPU work so that wall-clock timings are true."""
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def peak_memory_mib(device: torch.device | str = "cpu") -> dict[str, float | None]:
+    """Process RSS high-water mark and, on CUDA, torch's peak allocated memory, in MiB."""
+    try:
+        import resource  # POSIX only; Blender's worker may run on Windows
+    except ImportError:
+        rss_mib = None
+    else:
+        rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss  # KiB on Linux, bytes on macOS
+        rss_mib = rss / 2**20 if sys.platform == "darwin" else rss / 2**10
+    device = torch.device(device)
+    cuda = torch.cuda.max_memory_allocated(device) / 2**20 if device.type == "cuda" else None
+    return {"rss_peak_mib": rss_mib, "cuda_peak_mib": cuda}
+
+
+@torch.no_grad()
+def evaluate(
+    stylised: torch.Tensor,
+    original: torch.Tensor,
+    depths: torch.Tensor,
+    alphas: torch.Tensor,
+    cameras: Sequence[Camera],
+    *,
+    lpips: LPIPS | None = None,
+    extractor: FeatureExtractor | None = None,
+    bank_features: torch.Tensor | None = None,
+) -> dict[str, float | None]:
+    """``{ssim, st_rmse, st_lpips, lt_rmse, lt_lpips, texture_match}`` of stylised renders (V,H,W,3).
+
+    ``depths``/``alphas`` are the stylised renders' raw depth and alpha; texture_match needs the
+    feature ``extractor`` and the texture bank's features (M,C), else it is None.
+    """
+    out: dict[str, float | None] = {"ssim": content_ssim(stylised, original)}
+    for prefix, offset in (("st", SHORT_RANGE), ("lt", LONG_RANGE)):
+        scores = consistency(stylised, depths, alphas, cameras, offset, lpips=lpips)
+        out[f"{prefix}_rmse"], out[f"{prefix}_lpips"] = scores["rmse"], scores["lpips"]
+    out["texture_match"] = None
+    if extractor is not None and bank_features is not None:
+        # a view at a time (VGG memory); only the cells the object covers: the background takes no texture
+        features = torch.cat([covered_features(extractor, image, alpha) for image, alpha in zip(stylised, alphas)])
+        out["texture_match"] = texture_match(features, bank_features)
+    return out
+
+
+def covered_features(extractor: FeatureExtractor, image: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
+    """The feature vectors (n, C) of the covered cells (:func:`covered_cells` of ``alpha``) of one (H,W,3) image."""
+    features = extractor(image.permute(2, 0, 1)[None])[0]
+    return features.flatten(1).T[covered_cells(alpha, tuple(features.shape[-2:])).flatten()]

@@ -1,0 +1,89 @@
+"""A quick picture of how the texture will lie on the scene at a chosen orientation angle.
+
+The first view is rendered once; over the pixels the scene covers, the texture is laid out rotated
+by the angle (counter-clockwise on screen, the texture bank's convention) and scaled per depth
+group as the texture bank scales it (nearest group largest, by the view's own depth ratio unless
+one is given), then shaded by the render's
+luminance so the shape stays readable. No optimisation runs: it takes a fraction of a second and
+lets an artist choose the angle before starting a transfer.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import cv2
+import numpy as np
+import torch
+
+from ..cameras.camera import Camera
+from .config import MAX_DEPTH_RATIO
+from ..features.specs import RENDER_SCALE
+from ..render import render
+from ..scene.gaussians import GaussianScene
+from .texture import load_texture
+from .texture_bank import bank_scales, depth_groups, group_depth_ratio
+
+MIN_ALPHA = 0.05
+"""Pixels with less coverage than this show the background only."""
+SHADE_FLOOR = 0.35
+"""Darkest shading factor, so dark parts of the scene still show the texture."""
+
+
+def texture_layer(texture: np.ndarray, angle_deg: float, scale: float, width: int, height: int) -> np.ndarray:
+    """The texture tiled over a ``width`` x ``height`` image, ``scale`` image pixels per texture pixel,
+    rotated ``angle_deg`` counter-clockwise on screen about the image centre."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    linear = scale * np.array([[c, s], [-s, c]])
+    tex_centre = np.array([(texture.shape[1] - 1) / 2.0, (texture.shape[0] - 1) / 2.0])
+    img_centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
+    matrix = np.hstack([linear, (img_centre - linear @ tex_centre)[:, None]])
+    return cv2.warpAffine(texture, matrix, (width, height), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_WRAP)
+
+
+@torch.no_grad()
+def orientation_preview(
+    scene: GaussianScene,
+    texture: np.ndarray | str | os.PathLike,
+    camera: Camera,
+    angle_deg: float,
+    *,
+    size: int = 256,
+    resolution: int = 256,
+    texture_height: int = 256,
+    n_groups: int = 4,
+    depth_ratio: float = 0.0,
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0),
+    backend: str = "auto",
+) -> np.ndarray:
+    """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``.
+
+    ``resolution`` and ``texture_height`` are the transfer's settings: the texture appears as large
+    on screen as the transfer's texture bank makes it (its nearest scale spans
+    ``texture_height / RENDER_SCALE`` pixels of a ``resolution`` image), so the preview matches the run.
+    ``depth_ratio`` is the run's setting too (0: measured, here on this view alone).
+    """
+    image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
+    cam = camera.scaled(size / max(camera.width, camera.height))
+    out = render(scene.detach(), [cam], backend=backend)
+    premultiplied, alpha, depth = out.colors[0].cpu().numpy(), out.alphas[0], out.depths[0]
+    groups = depth_groups(depth, alpha, n_groups, min_alpha=MIN_ALPHA).cpu().numpy()
+    alpha = alpha.cpu().numpy()
+    covered = groups >= 0
+
+    colour = premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]
+    luminance = colour @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    bright = float(np.quantile(luminance[covered], 0.95)) if covered.any() else 1.0
+    shade = SHADE_FLOOR + (1.0 - SHADE_FLOOR) * np.clip(luminance / max(bright, 1e-6), 0.0, 1.0)
+
+    nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
+    laid = np.zeros((cam.height, cam.width, 3), np.float32)
+    if depth_ratio <= 0.0:
+        depth_ratio = min(group_depth_ratio(depth, out.alphas[0], n_groups, min_alpha=MIN_ALPHA), MAX_DEPTH_RATIO)
+    for k, factor in enumerate(bank_scales(n_groups, (1.0, depth_ratio))):
+        mask = groups == k
+        if mask.any():
+            laid[mask] = texture_layer(image, angle_deg, nearest_px * factor, cam.width, cam.height)[mask]
+    cover = np.where(covered, alpha, 0.0)[..., None]
+    result = laid * shade[..., None] * cover + np.asarray(background, np.float32) * (1.0 - cover)
+    return (np.clip(result, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)

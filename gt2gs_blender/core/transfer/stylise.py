@@ -1,0 +1,240 @@
+"""The optimisation of a texture transfer: stylise phases (GT² loss, AFCM) alternating with the
+Geometry Preservation Branch's correction phases, with densification early on (paper §3.2-3.4).
+
+Stylise phase: the DC colours learn (with ``stylise_geometry``, as in the authors' code, the geometry
+too, under the texture loss and the scale regulariser). Views are visited in the GT² order; each view's feature
+cells get targets from the texture bank guided by the prior angles carried from the previous view
+(the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
+With ``object_backdrop`` the stylise renders show the object over its own mean colour: over the
+background, a cell on the outline matches a texture edge running along it, which the texture loss
+then paints (a dark rim, a halo of splats) differently in every view.
+Without GT² (``gt2`` off) the targets are plain NNFM's: the nearest cell of the texture's own feature map.
+In the first half of the rounds the Gaussians whose DC-colour gradient is large are cloned or split.
+Correct phase: the Gaussians are rendered with the colours they had before stylisation (c^g) and
+only their geometry learns, against the content images, with the 3DGS reconstruction loss (blind to
+residuals under half a grey level, so geometry that already fits stays put) and the scale
+regulariser (tolerating each Gaussian's starting elongation), so what densification and the texture
+loss bent out of shape goes back.
+Gaussians outside the region never change (the optimiser's frozen rows).
+"""
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+
+import torch
+
+from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
+from ..cameras.camera import Camera
+from .config import TransferConfig
+from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
+from ..features.extractor import FeatureExtractor
+from ..cameras.camera import camera_extent
+from ..train.reconstruction import reconstruction_loss
+from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
+from .losses import anisotropy, content_loss, cosine_distance, scale_regulariser, tv_loss
+from ..train.optim import GaussianAdam, LearningRates
+from ..render import render
+from ..scene.gaussians import GaussianScene
+from .texture_bank import TextureBank
+
+GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
+"""The tensors the correction phases train."""
+COLOR_ATTACHMENT = "c_g"
+CORRECT_TOLERANCE = 0.5 / 255
+"""Residuals the correction phases leave alone: half an 8-bit grey level (see train.reconstruction)."""
+RATIO_ATTACHMENT = "ratio_limit"
+"""Per Gaussian, the scale ratio the correction phases tolerate (children inherit their parent's)."""
+
+
+@dataclass
+class ViewTargets:
+    """What the stylise phases need of one view, fixed for the run: the content image (the colour-
+    transferred original render, over the background), the backdrop (3,) stylise renders are made over
+    and the content features over it, covered cells, depth groups, AFCM frequency level, and the prior
+    link to the view visited before it (None for the first)."""
+
+    camera: Camera
+    content_image: torch.Tensor
+    backdrop: torch.Tensor
+    content_features: torch.Tensor
+    mask: torch.Tensor
+    groups: torch.Tensor | None
+    frequency: torch.Tensor
+    link: PriorLink | None = None
+
+
+@dataclass
+class StyliseStats:
+    """Counts for the report."""
+
+    stylise_steps: int = 0
+    correct_steps: int = 0
+    skipped_steps: int = 0
+    densified: list[dict] = field(default_factory=list)
+    plateau_skipped: dict[str, int] = field(default_factory=dict)  # steps left out at a loss plateau, per phase
+
+
+def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:
+    """The GT² visiting order of the views; sets each visited view's prior link to its predecessor."""
+    order = view_order([t.camera for t in targets])
+    for previous, current in itertools.pairwise(order):
+        t, p = targets[current], targets[previous]
+        t.link = prior_link(t.camera, depths[current], alphas[current], p.camera, depths[previous], alphas[previous],
+                            tuple(t.mask.shape), tuple(p.mask.shape))
+    return order
+
+
+def frequency_levels(images: list[torch.Tensor], masks: list[torch.Tensor]) -> list[torch.Tensor]:
+    """AFCM's I_f of every view (normalised together)."""
+    energies = [high_frequency_energy(image, tuple(mask.shape)) for image, mask in zip(images, masks)]
+    return normalise_frequency(energies, masks)
+
+
+class Styliser:
+    """Runs the schedule of one transfer on ``scene`` (the colour-transferred working scene)."""
+
+    def __init__(self, scene: GaussianScene, views: list[ViewTargets], order: list[int], bank: TextureBank,
+                 extractor: FeatureExtractor, config: TransferConfig, background: torch.Tensor,
+                 frozen: torch.Tensor | None = None) -> None:
+        self.views, self.order, self.bank, self.extractor, self.config = views, order, bank, extractor, config
+        self.background = background
+        self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
+        self.colors = ("sh_dc", "sh_rest") if config.stylised_sh_degree > 0 else ("sh_dc",)
+        self.opt = GaussianAdam(scene, self._lrs(), trainable=self.colors, frozen=frozen,
+                                attachments={COLOR_ATTACHMENT: scene.base_colors.detach(),
+                                             RATIO_ATTACHMENT: self._ratio_limits(scene)})
+        self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
+        self.stats = DensityStats(len(scene), "color", device=scene.device)
+        self.max_gaussians = int(len(scene) * config.densify_max_growth)
+        self.angle_maps: dict[int, torch.Tensor] = {}
+        self.cursor = 0
+        self.generator = torch.Generator().manual_seed(config.seed)
+        self.report = StyliseStats()
+
+    def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
+        """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
+        when larger and ``scale_ratio_from_start`` (a fitted scene's thin Gaussians are its geometry)."""
+        limit = torch.full((len(scene),), float(self.config.scale_ratio_limit), dtype=scene.dtype,
+                           device=scene.device)
+        if not self.config.scale_ratio_from_start:
+            return limit
+        return torch.maximum(limit, anisotropy(scene.log_scales.detach()))
+
+    def _lrs(self) -> dict[str, float]:
+        lrs = LearningRates().at(0, 1, self.extent)
+        lrs["sh_dc"] = self.config.lr
+        lrs["sh_rest"] = self.config.lr / 20.0  # 3DGS's ratio of the rest bands' rate to the DC's
+        return lrs
+
+    @property
+    def scene(self) -> GaussianScene:
+        return self.opt.scene
+
+    # -- schedule ---------------------------------------------------------------------------------
+    def phases(self) -> list[tuple[str, int, bool]]:
+        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct). Without the GPB the
+        stylise phases join, densifying over the same first half of the steps as with it, so that
+        removing the GPB removes only the correction phases."""
+        cfg = self.config
+        rounds = max(1, cfg.rounds)
+        out: list[tuple[str, int, bool]] = []
+        for r in range(rounds):
+            stylise = cfg.stylise_steps * (r + 1) // rounds - cfg.stylise_steps * r // rounds
+            out.append(("stylise", stylise, cfg.densify and r < math.ceil(rounds / 2)))
+            if cfg.gpb:
+                out.append(("correct", cfg.correct_steps * (r + 1) // rounds - cfg.correct_steps * r // rounds, False))
+        joined: list[tuple[str, int, bool]] = []
+        for phase in (p for p in out if p[1] > 0):
+            if joined and joined[-1][0] == phase[0] and joined[-1][2] == phase[2]:
+                joined[-1] = (phase[0], joined[-1][1] + phase[1], phase[2])
+            else:
+                joined.append(phase)
+        return joined
+
+    # -- stylise ----------------------------------------------------------------------------------
+    def stylise_step(self, densify: bool) -> tuple[float, torch.Tensor]:
+        """One GT² step on the next view in order; (texture loss, the rendered image over the background)."""
+        cfg = self.config
+        v = self.order[self.cursor]
+        view = self.views[v]
+        self.opt.set_trainable(self.colors + GEOMETRY if cfg.stylise_geometry else self.colors)
+        out = render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
+        image = out.colors[0]
+        feats = self.extractor(image.permute(2, 0, 1)[None])
+        distances, weights = self._texture_terms(feats[0], v, view)
+        counted = view.mask
+        style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
+        loss = cfg.lambda_style * style + cfg.lambda_content * content_loss(feats, view.content_features) \
+            + cfg.lambda_tv * tv_loss(image[None])
+        if cfg.stylise_geometry:
+            loss = loss + cfg.lambda_scale * self._scale_term()
+        loss.backward()
+        if densify and out.projection is not None:
+            self.stats.add(out.projection, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
+        self._step(loss)
+        self.cursor = (self.cursor + 1) % len(self.order)
+        self.report.stylise_steps += 1
+        if densify and self.report.stylise_steps % cfg.densify_every == 0 and len(self.scene) < self.max_gaussians:
+            done = densify_and_prune(self.opt, self.stats, self.densify_config, self.extent, prune_large=False,
+                                     generator=self.generator)
+            self.report.densified.append({"step": self.report.stylise_steps, "cloned": done.cloned,
+                                          "split": done.split, "pruned": done.pruned, "total": done.total})
+        shown = image.detach() + (1.0 - out.alphas[0].detach()[..., None]) * (self.background - view.backdrop)
+        return float(style.detach()), shown
+
+    def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
+        cfg = self.config
+        prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
+        # NNFM's bank is one unlabelled feature map: every cell matches all of it, whatever its depth group
+        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0,
+                                 view.groups if cfg.gt2 else None, view.mask)
+        self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
+        c = feats.shape[0]
+        targets = self.bank.features[match.indices.reshape(-1)].to(feats)
+        distances = cosine_distance(feats.reshape(c, -1).T, targets).reshape(view.mask.shape)
+        if not cfg.afcm:
+            return distances, torch.ones_like(distances)
+        phi = distortion(match) if cfg.gt2 else torch.zeros_like(distances)
+        level = depth_level(view.groups, cfg.n_scales, distances)
+        weights = afcm_weight(level, view.frequency.to(distances), phi.to(distances),
+                              AFCMWeights(cfg.lambda_depth, cfg.lambda_frequency, cfg.lambda_distortion))
+        return distances, weights.detach()
+
+    def _prior(self, v: int, view: ViewTargets) -> torch.Tensor:
+        """Prior angle per cell: the start angle in the first view, else carried from the view before."""
+        if view.link is None:
+            angle = torch.full(view.mask.shape, float(self.config.angle) % 360.0)
+            return torch.where(view.mask, angle, torch.full_like(angle, math.nan))
+        previous = self.order[self.order.index(v) - 1]
+        if previous not in self.angle_maps:
+            return torch.full(view.mask.shape, math.nan)
+        return view.link.prior_angles(self.angle_maps[previous])
+
+    # -- correct (Geometry Preservation Branch) ---------------------------------------------------
+    def correct_step(self) -> float:
+        """One reconstruction step of the geometry against a random content image, rendered with c^g."""
+        cfg = self.config
+        self.opt.set_trainable(GEOMETRY)
+        v = int(torch.randint(len(self.views), (1,), generator=self.generator))
+        view = self.views[v]
+        colors = self.opt.attachments[COLOR_ATTACHMENT]
+        out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
+                     render_depth=False)
+        loss = reconstruction_loss(out.colors[0], view.content_image, tolerance=CORRECT_TOLERANCE) + \
+            cfg.lambda_scale * self._scale_term()
+        loss.backward()
+        self._step(loss)
+        self.report.correct_steps += 1
+        return float(loss.detach())
+
+    def _scale_term(self) -> torch.Tensor:
+        """The scale regulariser at each Gaussian's tolerated ratio."""
+        return scale_regulariser(self.scene.log_scales, self.opt.attachments[RATIO_ATTACHMENT])
+
+    def _step(self, loss: torch.Tensor) -> None:
+        if not self.opt.step(loss):
+            self.report.skipped_steps += 1
+        self.opt.zero_grad()
