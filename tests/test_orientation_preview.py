@@ -1,7 +1,8 @@
-"""The orientation preview: the texture's on-screen direction follows the angle, nearer is larger, fast."""
-from __future__ import annotations
+"""The orientation preview: the texture's on-screen direction follows the angle, nearer is larger.
 
-import time
+Its latency (the issue's budget: 2 s at 256 px on the CPU) is measured by bench/latency.py, not asserted here.
+"""
+from __future__ import annotations
 
 import numpy as np
 import pytest
@@ -101,10 +102,9 @@ def test_nearer_depth_group_shows_the_texture_larger(depth_ratio, low, high):
     assert low < stripe_period(near_row) / stripe_period(far_row) < high
 
 
-def test_preview_is_fast_at_256_pixels():
-    """The issue's budget: at most 2 s at 256 px on the CPU (here far less; loose bound for busy machines)."""
+def test_preview_at_the_default_size_is_an_image_of_the_wall():
+    """The setup bench/latency.py times: the default 256 px preview of a 100 x 100 wall is produced."""
     scene, cam, stripes = wall(100), front_camera(), horizontal_stripes()
-    orientation_preview(scene, stripes, cam, 0.0)  # builds / loads the rasterizer once
-    start = time.perf_counter()
-    orientation_preview(scene, stripes, cam, 45.0)
-    assert time.perf_counter() - start < 2.0
+    image = orientation_preview(scene, stripes, cam, 45.0)
+    assert image.shape == (256, 256, 3) and image.dtype == np.uint8
+    assert centre(image).astype(np.float64).mean(axis=-1).std() > 20.0  # the stripes show, not a flat wall

@@ -61,12 +61,18 @@ def colours_differ(a: np.ndarray, b: np.ndarray, tol: float = 0.02) -> bool:
     return float(np.abs(a.mean(axis=0) - b.mean(axis=0)).max()) > tol
 
 
-@pytest.fixture
-def job(tmp_path):
-    """A job whose inputs (a small scene and a stripe texture) are in its folder; cleaned up afterwards."""
+def job_with_inputs() -> Job:
+    """A new job whose inputs (a small scene and a stripe texture) are in its folder (bench/latency.py uses it too)."""
     job = Job()
     write_ply(job.path("input.ply"), blob_scene(600))
     write_png(job.path("texture.png"), (stripes() * 255).astype(np.uint8))
+    return job
+
+
+@pytest.fixture
+def job(tmp_path):
+    """A job with its inputs written; cleaned up afterwards."""
+    job = job_with_inputs()
     yield job
     job.cleanup()
     assert not job.folder.exists()
@@ -108,11 +114,12 @@ def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
 
 
 def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
+    """How long the cancel takes is measured by bench/latency.py; a worker that ignored it would be killed
+    after the grace period and fail the exit status check below."""
     job.start(transfer_spec(tmp_path, stylise_steps=400))
     wait_for(job, lambda s: s.stage == "stylise" and s.step >= 2)
-    started = time.monotonic()
     status = job.cancel()
-    assert status.state == CANCELLED and time.monotonic() - started < 5.0
+    assert status.state == CANCELLED
     assert job.process.returncode == 3  # stopped by itself (SIGTERM handled), not killed
     assert not job.path("out.ply").exists() and not job.path("report.json").exists()
 
