@@ -1,7 +1,8 @@
 """Fixtures for the Blender tests: the bpy module, the registered extension, fresh factory settings.
 
-Every test module here starts with ``pytest.importorskip("bpy")`` and ``pytestmark =
-pytest.mark.blender``, so the whole folder skips cleanly where bpy is not installed. The extension
+Every test module here starts with ``pytest.importorskip("bpy", exc_type=ModuleNotFoundError)`` and
+``pytestmark = pytest.mark.blender``, so the whole folder skips cleanly where bpy is not installed,
+while a bpy that is installed but fails to import is an error, not a skip. The extension
 is registered once per session from the source tree (as the test runner imports it) and each test
 starts from Blender's factory settings with an empty scene, as MolecularNodes' tests do. Installing
 and enabling the built extension zip runs in a subprocess (test_extension.py), so that its
@@ -20,7 +21,7 @@ DONUT_COUNT = 45624
 
 @pytest.fixture(scope="session")
 def bpy_module():
-    return pytest.importorskip("bpy")
+    return pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
 
 @pytest.fixture(scope="session")

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-bpy = pytest.importorskip("bpy")
+bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
 from .conftest import DONUT, DONUT_COUNT  # noqa: E402
 

@@ -16,8 +16,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
-torch = pytest.importorskip("torch")
+bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
+torch = pytest.importorskip("torch", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.blender import splats, transform  # noqa: E402
 from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402

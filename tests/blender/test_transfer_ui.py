@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-bpy = pytest.importorskip("bpy")
+bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.blender import splats, transfer_run, views  # noqa: E402
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus  # noqa: E402
