@@ -1,8 +1,6 @@
 """The extension's identity in Blender: its add-on id, its preferences and its per-user folders."""
 from __future__ import annotations
 
-import os
-
 import bpy
 
 ADDON_ID = __package__.rpartition(".")[0]
@@ -22,9 +20,3 @@ def deps_dir(create: bool = False) -> str | None:
     except ValueError:  # not installed as an extension (e.g. registered from a source checkout)
         return None
 
-
-def weights_path(context=None) -> str | None:
-    """The weights folder chosen in the preferences (an absolute path), or None to use the usual search."""
-    prefs = preferences(context)
-    folder = prefs.weights_dir if prefs is not None else ""
-    return os.path.abspath(bpy.path.abspath(folder)) if folder else None

@@ -20,7 +20,8 @@ import bpy
 import bpy.utils.previews
 import numpy as np
 
-from . import addon, splats, views
+from ..core.transfer.config import IN_PREFERENCES, IN_SCENE
+from . import addon, properties, splats, views
 from .job import CANCELLED, DONE, ERROR, Job, JobStatus
 
 SELECTION_ATTRIBUTE = ".selection"
@@ -57,28 +58,15 @@ def target_object(context):
 
 
 def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str, Any]]:
-    """(preset, TransferConfig overrides) from the panel's settings, the preferences and the operator's keywords."""
+    """(preset, TransferConfig settings): the panel's settings (none when a script names a preset: then the
+    preset's), the preferences' machine settings, and the operator's keywords."""
     settings = context.scene.gt2gs
     prefs = addon.preferences(context)
-    device = settings.device if settings.device != "DEFAULT" else (prefs.device if prefs else "AUTO")
-    config: dict[str, Any] = {
-        "angle": float(overrides.get("angle", settings.angle)), "lambda_content": settings.lambda_content,
-        "seed": settings.seed, "color_transfer": settings.color_transfer, "depth_groups": settings.depth_groups,
-        "device": device.lower(), "weights_path": addon.weights_path(context),
-        "threads": prefs.threads if prefs and prefs.threads > 0 else None,
-    }
-    for key, prop in (("stylise_steps", "steps"), ("resolution", "resolution"), ("n_angles", "n_angles"),
-                      ("texture_height", "texture_size")):
-        if getattr(settings, prop) > 0:
-            config[key] = getattr(settings, prop)
-    for key in ("gt2", "afcm", "gpb", "densify"):  # switched off by the user; on means as the preset does
-        if not getattr(settings, key):
-            config[key] = False
-    if settings.depth_ratio >= 1.0:  # below 1: measured from the views
-        config["depth_ratio"] = settings.depth_ratio
-    for key in ("stylise_geometry", "object_backdrop"):  # switched on by the user; off means as the preset does
-        if getattr(settings, key):
-            config[key] = True
+    config = {} if "preset" in overrides else properties.config_values(settings, IN_SCENE)
+    if prefs is not None:
+        config.update(properties.config_values(prefs, IN_PREFERENCES))
+    if "angle" in overrides:
+        config["angle"] = float(overrides["angle"])
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
 
 

@@ -1,10 +1,12 @@
-"""The extension's preferences: dependency status and install, weights folder, default device, CPU threads."""
+"""The extension's preferences: dependency status and install, and the machine settings (device, threads,
+weights, rasterizer, caches) generated from the transfer settings' metadata."""
 from __future__ import annotations
 
 import bpy
-from bpy.props import EnumProperty, IntProperty, StringProperty
+from bpy.props import EnumProperty
 
-from ..blender import addon
+from ..blender import addon, properties
+from ..core.transfer.config import IN_PREFERENCES, user_settings
 from ..app import deps
 from ..operators import dependencies
 
@@ -21,23 +23,16 @@ def dependency_rows(deps_dir: str | None) -> list[tuple[str, str, bool]]:
 
 
 class GT2GS_AP_preferences(bpy.types.AddonPreferences):
-    bl_idname = addon.ADDON_ID
+    """Dependencies, and the machine settings every transfer of this Blender uses (device, threads, weights)."""
 
-    build: EnumProperty(
-        name="Torch Build", default="CPU",
-        items=(("CPU", "CPU", "The CPU-only torch (smaller download, any machine)"),
-               ("CUDA", "CUDA", "torch for NVIDIA GPUs (CUDA 12.8, a large download)")))
-    weights_dir: StringProperty(
-        name="Weights Folder", subtype="DIR_PATH",
-        description="Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth); "
-                    "empty: $GT2GS_WEIGHTS_DIR, then torch's cache")
-    device: EnumProperty(
-        name="Default Device", default="AUTO",
-        items=(("AUTO", "Auto", "CUDA when available, else CPU"), ("CPU", "CPU", ""), ("CUDA", "CUDA", "")))
-    threads: IntProperty(
-        name="CPU Threads", default=0, min=0, soft_max=64,
-        description="Threads the transfer worker uses on the CPU; 0: one per physical core. "
-                    "Fewer keeps Blender more responsive while a transfer runs")
+    bl_idname = addon.ADDON_ID
+    __annotations__ = {
+        "build": EnumProperty(
+            name="Torch Build", default="CPU",
+            items=(("CPU", "CPU", "The CPU-only torch (smaller download, any machine)"),
+                   ("CUDA", "CUDA", "torch for NVIDIA GPUs (CUDA 12.8, a large download)"))),
+        **properties.annotations(IN_PREFERENCES),
+    }
 
     def draw(self, context):
         layout = self.layout
@@ -55,9 +50,10 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
         row.operator(dependencies.GT2GS_OT_install_dependencies.bl_idname, icon="IMPORT")
         if not bpy.app.online_access:
             box.label(text="Allow Online Access (Preferences ▸ System) to download packages", icon="INFO")
-        layout.prop(self, "weights_dir")
-        layout.prop(self, "device")
-        layout.prop(self, "threads")
+        column = layout.column()
+        column.use_property_split = True
+        for name, _, _ in user_settings(IN_PREFERENCES):
+            column.prop(self, name)
 
 
 classes = (GT2GS_AP_preferences,)

@@ -12,6 +12,7 @@ import bpy
 
 from ..blender import transfer_run
 from ..blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from ..core.transfer.config import IN_SCENE, PARTS, user_settings
 from .sidebar import CATEGORY
 
 STAGE_NAMES = {"starting": "Starting", "prepare": "Preparing views", "bank": "Texture bank",
@@ -104,6 +105,8 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
 
     def draw(self, context):
         layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
         settings = context.scene.gt2gs
         view = current_view(context)
         layout.prop(settings, "target")
@@ -121,8 +124,8 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
         row = layout.row(align=True)
         row.prop(settings, "angle")
         row.prop(settings, "auto_preview", text="", icon="FILE_REFRESH")
+        layout.prop(settings, "texture_height")
         layout.prop(settings, "lambda_content")
-        layout.prop(settings, "device")
         row = layout.row(align=True)
         row.prop(settings, "result_mode", expand=True)
         layout.prop(settings, "region_only")
@@ -148,22 +151,30 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
                 split.label(text=value)
 
 
-class VIEW3D_PT_gt2gs_advanced(bpy.types.Panel):
-    bl_space_type = "VIEW_3D"
-    bl_region_type = "UI"
-    bl_category = CATEGORY
-    bl_label = "Advanced"
-    bl_parent_id = "VIEW3D_PT_gt2gs_transfer"
-    bl_options = {"DEFAULT_CLOSED"}
+MAIN_SETTINGS = ("n_views", "angle", "texture_height", "lambda_content")
+"""Settings the main panel shows; every other scene setting is in its part's sub-panel."""
 
-    def draw(self, context):
-        settings = context.scene.gt2gs
+
+def part_panel(part: str, title: str) -> type:
+    """A closed sub-panel listing the scene settings of one part of the method."""
+    names = [name for name, meta, _ in user_settings(IN_SCENE) if meta.part == part and name not in MAIN_SETTINGS]
+
+    def draw(self, context) -> None:
         column = self.layout.column()
-        for name in ("steps", "resolution", "n_angles", "texture_size", "seed", "color_transfer", "depth_groups",
-                     "depth_ratio", "object_backdrop", "gt2", "afcm", "gpb", "stylise_geometry", "densify"):
-            column.prop(settings, name)
+        column.use_property_split = True
+        column.use_property_decorate = False
+        for name in names:
+            column.prop(context.scene.gt2gs, name)
+
+    return type(f"VIEW3D_PT_gt2gs_{part}", (bpy.types.Panel,), {
+        "bl_space_type": "VIEW_3D", "bl_region_type": "UI", "bl_category": CATEGORY, "bl_label": title,
+        "bl_parent_id": "VIEW3D_PT_gt2gs_transfer", "bl_options": {"DEFAULT_CLOSED"}, "draw": draw,
+        "__doc__": f"The {title} settings of the texture transfer"})
 
 
-classes = (VIEW3D_PT_gt2gs_transfer, VIEW3D_PT_gt2gs_advanced)
+PART_PANELS = tuple(part_panel(part, title) for part, title in PARTS.items()
+                    if any(meta.part == part and name not in MAIN_SETTINGS for name, meta, _ in user_settings(IN_SCENE)))
+
+classes = (VIEW3D_PT_gt2gs_transfer, *PART_PANELS)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

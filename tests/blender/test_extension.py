@@ -90,7 +90,7 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
         run = sys.modules[module + ".blender.transfer_run"]
         report["job_threads"] = run.config_overrides(bpy.context, {{}})[1].get("threads")
         prefs.threads = 0
-        report["job_threads_default"] = run.config_overrides(bpy.context, {{}})[1].get("threads", "unset")
+        report["job_threads_default"] = run.config_overrides(bpy.context, {{}})[1].get("threads")
         donut = {str(DONUT)!r}
         if {DONUT.is_file()!r}:
             bpy.ops.gt2gs.import_ply(filepath=donut)
@@ -119,8 +119,8 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
 
     assert report["enabled"]
     assert Path(report["loaded_from"]).resolve() == (repo / "gt2gs_blender" / "__init__.py").resolve()
-    assert report["operators"] == [True] * 7 and report["preferences"] == ["AUTO", 0]
-    assert report["job_threads"] == 3 and report["job_threads_default"] == "unset"
+    assert report["operators"] == [True] * 7 and report["preferences"] == ["auto", 0]
+    assert report["job_threads"] == 3 and report["job_threads_default"] == 0
     if DONUT.is_file():
         assert report["imported"] == ["POINTCLOUD", DONUT_COUNT]
         assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.scene.ply"]

@@ -50,7 +50,7 @@ def blob(fresh, inputs):
     settings = fresh.context.scene.gt2gs
     settings.texture_path = str(inputs["texture"])
     settings.preset = "preview"
-    settings.steps, settings.resolution, settings.n_angles, settings.n_views = 6, 48, 4, 3
+    settings.stylise_steps, settings.resolution, settings.n_angles, settings.n_views = 6, 48, 4, 3
     yield fresh.context.active_object
     for run in list(transfer_run.ACTIVE.values()):
         run.cancel()
@@ -136,7 +136,7 @@ def test_modal_cycle_streams_progress_and_preview_then_applies(blob):
 
 
 def test_cancel_mid_run_leaves_the_scene_and_no_files(blob):
-    bpy.context.scene.gt2gs.steps = 400
+    bpy.context.scene.gt2gs.stylise_steps = 400
     before = snapshot()
     run = transfer_run.TransferRun.start(bpy.context, {})
     tick_until(run, lambda s: s.stage == "stylise" and s.step >= 2)
@@ -150,7 +150,7 @@ def test_cancel_mid_run_leaves_the_scene_and_no_files(blob):
 
 
 def test_a_second_transfer_while_one_runs_is_refused(blob):
-    bpy.context.scene.gt2gs.steps = 400
+    bpy.context.scene.gt2gs.stylise_steps = 400
     before = snapshot()
     run = transfer_run.TransferRun.start(bpy.context, {})
     tick_until(run, lambda s: s.stage is not None)
@@ -163,7 +163,7 @@ def test_a_second_transfer_while_one_runs_is_refused(blob):
 
 
 def test_killed_worker_is_a_clear_error_and_the_scene_is_unchanged(blob):
-    bpy.context.scene.gt2gs.steps = 400
+    bpy.context.scene.gt2gs.stylise_steps = 400
     before = snapshot()
     run = transfer_run.TransferRun.start(bpy.context, {})
     tick_until(run, lambda s: s.stage == "stylise")
@@ -182,7 +182,7 @@ def test_worker_out_of_memory_is_a_clear_error_and_the_scene_is_unchanged(blob):
     """A real allocation failure: the worker's address space is capped as it starts, then it is asked
     for 4096 px views on the CPU."""
     settings = bpy.context.scene.gt2gs
-    settings.resolution, settings.device = 4096, "CPU"
+    settings.resolution = 4096
     before, folders, cap = snapshot(), job_folders(), address_space_cap()
     run = transfer_run.TransferRun.start(bpy.context, {})
     resource.prlimit(run.job.process.pid, resource.RLIMIT_AS, (cap, cap))
@@ -272,20 +272,25 @@ def test_scene_cameras_become_views_in_object_space(fresh):
 
 
 def test_panel_settings_and_keywords_become_the_job_config(fresh):
-    settings = fresh.context.scene.gt2gs
-    preset, config = transfer_run.config_overrides(fresh.context, {})
-    assert preset == "fast" and config["device"] == "auto" and config["angle"] == 0.0
-    assert not {"stylise_steps", "resolution", "n_angles", "texture_height", "gt2", "gpb", "stylise_geometry",
-                "depth_ratio", "object_backdrop", "weights_path", "threads"} & set(config)
-    settings.steps, settings.gpb, settings.device, settings.angle, settings.texture_size = 12, False, "CPU", 15.0, 96
-    settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = True, 2.0, True
-    preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
-    assert preset == "preview" and config["angle"] == -30.0 and config["stylise_steps"] == 12
-    assert config["gpb"] is False and config["device"] == "cpu" and config["texture_height"] == 96
-    assert config["stylise_geometry"] is True and config["depth_ratio"] == 2.0 and config["object_backdrop"] is True
+    from gt2gs_blender.core.transfer.config import PRESETS
     from gt2gs_blender.core.transfer.config import preset as make_preset
 
-    assert make_preset(preset, **config).gpb is False  # every key is a TransferConfig field
+    settings = fresh.context.scene.gt2gs
+    preset, config = transfer_run.config_overrides(fresh.context, {})
+    assert preset == "fast" and make_preset(preset, **config) == PRESETS["fast"]  # a new scene shows the preset
+    settings.preset = "balanced"  # choosing a preset shows its values in every setting
+    preset, config = transfer_run.config_overrides(fresh.context, {})
+    assert preset == "balanced" and config["resolution"] == 384 and make_preset(preset, **config) == PRESETS["balanced"]
+    settings.stylise_steps, settings.gpb, settings.angle, settings.texture_height = 12, False, 15.0, 96
+    settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = True, 2.0, True
+    settings.background = (0.0, 0.5, 1.0)
+    _, config = transfer_run.config_overrides(fresh.context, {})
+    made = make_preset("balanced", **config)
+    assert (made.stylise_steps, made.gpb, made.angle, made.texture_height) == (12, False, 15.0, 96)
+    assert made.stylise_geometry and made.depth_ratio == 2.0 and made.object_backdrop
+    assert made.background == (0.0, 0.5, 1.0) and made.resolution == 384
+    preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
+    assert preset == "preview" and config == {"angle": -30.0}  # a script's preset is that preset exactly
 
 
 def test_transfer_view_in_each_state():
@@ -358,3 +363,17 @@ def test_preview_preset_on_the_shared_donut(fresh, donut, monkeypatch):
     assert report["weights"]["fallback"] is False
     print(f"donut preview preset through the operator: {seconds:.1f} s")
     transfer_run.OUTCOMES.clear()
+
+
+def test_every_setting_has_a_blender_property_unless_internal(fresh):
+    from gt2gs_blender.core.transfer.config import IN_PREFERENCES, IN_SCENE, SETTINGS
+    from gt2gs_blender.panels.preferences import GT2GS_AP_preferences
+
+    scene_props = fresh.types.Scene.bl_rna.properties["gt2gs"].fixed_type.properties
+    prefs_props = GT2GS_AP_preferences.__annotations__
+    where = {IN_SCENE: set(scene_props.keys()), IN_PREFERENCES: set(prefs_props)}
+    missing = [name for name, meta in SETTINGS.items() if not meta.internal and name not in where[meta.blender]]
+    assert not missing, f"settings without a Blender property: {missing}"
+    for name, meta in SETTINGS.items():
+        if meta.blender == IN_SCENE and not meta.internal:
+            assert scene_props[name].name == meta.label and scene_props[name].description.startswith(meta.help)

@@ -14,7 +14,8 @@ import torch
 from ...core.scene.ply import read_ply
 from ...core.transfer.texture import load_texture
 from ...core.scene.gaussians import GaussianScene
-from . import transfer as transfer_cmd
+from .options import add_setting_arguments, config_from_args
+from .transfer import GIVEN
 from .args import _positive_int, _render_options, _scene_options
 
 
@@ -36,8 +37,9 @@ def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
                    help="output folder (default: out/demo)")
     p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="use this scene instead of the donut")
     p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
-    p.add_argument("--views", type=_positive_int, metavar="N", help="number of automatic views (default: the preset's)")
-    transfer_cmd.add_transfer_arguments(p)
+    p.add_argument("--views", dest="n_views", type=_positive_int, metavar="N",
+                   help="number of automatic views (default: the preset's)")
+    add_setting_arguments(p, given=GIVEN)
     p.set_defaults(run=cmd_demo)
 
 
@@ -48,9 +50,9 @@ def cmd_demo(args: argparse.Namespace) -> None:
     print(f"scene: {source} ({len(scene):,} Gaussians)")
     print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
     image = stripes_texture() if texture is None else load_texture(texture)
-    if args.weights is None and not os.environ.get(ENV_VAR) and SHARED_WEIGHTS.is_dir():
-        args.weights = SHARED_WEIGHTS
-    config = transfer_cmd.config_from_args(args)
+    if args.weights_path is None and not os.environ.get(ENV_VAR) and SHARED_WEIGHTS.is_dir():
+        args.weights_path = str(SHARED_WEIGHTS)
+    config = config_from_args(args)
     args.out.mkdir(parents=True, exist_ok=True)
     with TerminalProgress("demo") as bar:
         result = run_transfer(scene, image, None, config, args.out / "stylised.ply", report=args.out / "report.json",

@@ -1,82 +1,212 @@
-"""Texture-transfer settings and the named presets (what the CLI's ``--preset`` and the UI offer)."""
+"""Texture-transfer settings, what each one means, and the named presets: the one source of all three.
+
+Every field of :class:`TransferConfig` carries a :class:`Setting` (label, one-line help in an
+artist's words, unit, range, the part of the method it belongs to). The command line's flags, the
+Blender panel's properties and tooltips, and the panel-to-config map are generated from these, so a
+new setting is written once, here. The paper's value of a setting is read from the ``paper-llff``
+preset, not written again.
+"""
+
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
-
 
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
 the farthest group's texture stays half the nearest's size (128 px at the default height), not a smudge."""
+
+PARTS = {
+    "views": "Views",
+    "texture": "Texture",
+    "stylise": "Stylisation",
+    "gt2": "GT² Orientation",
+    "afcm": "Adaptive Control (AFCM)",
+    "gpb": "Geometry Preservation",
+    "speed": "Speed",
+    "machine": "Machine",
+}
+"""The parts of a run the settings belong to, in the order the CLI's help and Blender's panels show them."""
+
+IN_SCENE, IN_PREFERENCES = "scene", "preferences"
+
+
+@dataclass(frozen=True)
+class Setting:
+    """What a setting means to a user, and where the front ends offer it."""
+
+    label: str
+    help: str
+    part: str
+    unit: str = ""
+    min: float | None = None
+    max: float | None = None
+    soft_max: float | None = None
+    choices: tuple[str, ...] = ()
+    flag: str | None = None
+    """The CLI flag when it is not ``--field-name``."""
+    switch: tuple[str, Any, str] | None = None
+    """An extra CLI switch (flag, value it sets, help), kept for a common use of the setting."""
+    blender: str = IN_SCENE
+    """Where Blender offers it: the scene's GT² settings, or the add-on preferences (machine settings)."""
+    internal: bool = False
+    """Set by the program, not by users: no CLI flag, no Blender property."""
+
+
+def setting(default: Any, label: str, help: str, part: str, **meta: Any) -> Any:
+    """A dataclass field with its :class:`Setting` (``help`` is the one-line tooltip)."""
+    return field(default=default, metadata={"setting": Setting(label, help, part, **meta)})
 
 
 @dataclass(frozen=True)
 class TransferConfig:
     """Every setting of a transfer run. Loss weights follow the paper's names (lambda_*)."""
 
-    resolution: int = 256            # longest image side the views are rendered at
-    n_views: int = 16                # automatic views when none are given
-    stylise_steps: int = 200         # optimisation steps of the stylisation stage
-    lr: float = 0.02                 # Adam learning rate on the DC colour coefficients
-    stylised_sh_degree: int = 0      # SH degree of restyled colours: 0 = the same from every side (paper's code);
-                                     # 1-3 train view-dependent bands too (lr/20), as NNFM baselines' fields do
-    lambda_style: float = 1.0        # NNFM / texture loss weight
-    lambda_content: float = 0.005    # content feature MSE (paper: 0.005 LLFF, 0.0005 360 scenes)
-    lambda_tv: float = 0.02          # image total variation (paper 0.02)
-    n_scales: int = 4                # texture scales = depth groups (paper K = 4)
-    n_angles: int = 36               # rotations of the texture over 360 degrees (paper 360)
-    texture_height: int = 256        # texture height at the nearest depth group (paper 256)
-    cell_coverage: float = 0.5       # the texture loss counts feature cells covered beyond this fraction (1: wholly)
-    object_backdrop: bool = False    # stylise renders show the object over its own mean colour, not the background:
-                                     # no outline for the texture loss to trace (dark rims; halos of moved splats)
-    depth_groups: bool = True        # match each feature cell only against its depth group's scale
-    depth_ratio: float = 0.0         # farthest/nearest group depth the bank's scales follow: 0 = the views' own
-                                     # (paper: Z_1/Z_k), at most MAX_DEPTH_RATIO; >= 1 fixed (authors' code: 2)
-    color_transfer: bool = True      # ARF colour transfer before and after stylisation
-    angle: float = 0.0               # orientation control: the texture's angle in the first view (degrees)
-    gt2: bool = True                 # GT² loss: angles carried across views (False = NNFM on the texture as it lies)
-    lambda_prior: float = 0.002      # prior angle cost per degree (authors' code: 100 = a hard constraint)
-    afcm: bool = True                # Adaptive Fine-grained Control Module weights per feature cell
-    lambda_depth: float = 0.8        # AFCM {lambda_d, lambda_f, lambda_phi} (paper 0.8, 0.8, 0.25)
-    lambda_frequency: float = 0.8
-    lambda_distortion: float = 0.25
-    gpb: bool = True                 # Geometry Preservation Branch: correction phases between stylise phases
-    stylise_geometry: bool = False   # the texture loss moves geometry too, as in the authors' code (bolder texture,
-                                     # looser shape; the GPB pulls it back). Off: stylise phases train colours only
-    rounds: int = 4                  # stylise/correct alternations (the steps are split evenly)
-    correct_steps: int = 100         # GPB correction steps in all (geometry vs content images)
-    lambda_scale: float = 0.1        # scale regulariser weight in the correction phases (paper 0.1)
-    scale_ratio_limit: float = 10.0  # largest/second scale ratio tolerated before it is penalised (authors: 1)
-    scale_ratio_from_start: bool = True  # ... or each Gaussian's own starting ratio if larger: the fit's needles
-                                     # are geometry to preserve, only stylisation's new ones are penalised
-    densify: bool = True             # clone/split by the DC-colour gradient in the first half of the rounds
-    densify_every: int = 25          # stylise steps between densification events
-    densify_grad_threshold: float = 2e-4  # mean |dL/d f_dc| that makes a Gaussian grow
-    densify_max_growth: float = 1.5  # no densification once the scene has grown by this factor
-    skip_hidden: bool = True         # freeze Gaussians no view sees (left out of rendering and optimisation)
-    hidden_threshold: float = 0.1    # ... when their blending weight summed over all pixels of all views is below this
-    skip_sh: bool = True             # render the original only up to the highest SH band with a non-zero coefficient
-    adaptive_angles: bool = False    # fewer bank angles for a texture with no strong local orientation (n_angles = most)
-    dedup_threshold: float = 0.0     # drop bank rows with a twin above this cosine in their depth group (0 = off)
-    match_channels: int = 64         # match on this many PCA channels of the bank (0 = all; targets stay full)
-    drop_views: bool = False         # drop views that add less than min_new_coverage of unseen covered pixels
-    min_new_coverage: float = 0.02
-    plateau_window: int = 16         # stop a phase when the mean loss of this many steps stops falling (0 = off)
-    plateau_tol: float = 0.01        # ... by less than this fraction of the window before
-    feature_scale: float = 0.5       # renders are resized by this before VGG (paper 0.5)
-    mixed_precision: bool = True     # VGG convolutions in float16 on a CUDA GPU (float32 on the CPU)
-    bank_cache: bool = True          # keep texture banks on disk across runs (cache_dir or $GT2GS_CACHE_DIR)
-    reuse_content: bool = True       # reuse the last run's content renders and hidden set (same scene + views)
-    background: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    features: str = "auto"           # feature network preference (see features.load_feature_extractor)
-    weights_path: str | None = None  # explicit weights file or folder
-    device: str = "auto"             # auto | cpu | cuda
-    threads: int = 0                 # CPU threads for torch and the C++ rasterizer (0 = one per physical core)
-    backend: str = "auto"            # rasterizer backend
-    seed: int = 0
-    preview_every: int = 10          # steps between preview frames sent to the progress callback
-    evaluate: bool = True            # measure the paper's metrics at the end (report["metrics"])
-    cache_dir: str | None = None     # texture-bank cache (default: $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)
+    # -- views
+    resolution: int = setting(256, "Resolution", "Longest side of the working views", "views", unit="px", min=16,
+                              soft_max=1024)
+    n_views: int = setting(16, "View Count", "Automatic views around the object (when no cameras are given)",
+                           "views", min=1, soft_max=64, flag="--views")
+    feature_scale: float = setting(0.5, "Feature Scale", "Renders are resized by this before the feature network",
+                                   "views", min=0.05, max=4.0)
+    background: tuple[float, float, float] = setting(
+        (1.0, 1.0, 1.0), "Background", "Colour behind the object in the working views", "views", min=0.0, max=1.0)
+    drop_views: bool = setting(False, "Drop Redundant Views",
+                               "Leave out views that show almost nothing the others do not", "speed")
+    min_new_coverage: float = setting(0.02, "New Coverage",
+                                      "A view is redundant when it adds less than this share of unseen pixels",
+                                      "speed", min=0.0, max=1.0)
+    # -- texture
+    texture_height: int = setting(
+        256, "Texture Size", "Height of the texture on the nearest surfaces, in pixels of the view at half the "
+        "working resolution (as the feature network sees it); smaller repeats the pattern more often",
+        "texture", unit="px", min=8, soft_max=1024)
+    n_angles: int = setting(36, "Texture Rotations", "Rotations of the texture over 360° the bank holds", "texture",
+                            min=1, max=360)
+    n_scales: int = setting(4, "Depth Groups", "Texture sizes, one per depth group of the view (paper: K)",
+                            "texture", min=1, max=8)
+    depth_groups: bool = setting(True, "Depth Grouping",
+                                 "Show the texture larger on near surfaces than on far ones", "texture")
+    depth_ratio: float = setting(
+        0.0, "Depth Ratio", "How many times smaller the texture shows on the farthest surfaces than on the nearest: "
+        f"0 = as perspective shows it, measured from the views (at most {MAX_DEPTH_RATIO:g}); 1-16 fixed",
+        "texture", min=0.0, max=16.0)
+    cell_coverage: float = setting(0.5, "Cell Coverage",
+                                   "How much of a feature cell the object must cover for the texture to count there",
+                                   "texture", min=0.0, max=1.0)
+    adaptive_angles: bool = setting(False, "Adaptive Rotations",
+                                    "Fewer rotations for a texture with no strong direction", "speed")
+    dedup_threshold: float = setting(0.0, "Deduplicate Bank",
+                                     "Drop near-identical bank entries above this similarity (0 = keep all)", "speed",
+                                     min=0.0, max=1.0)
+    match_channels: int = setting(64, "Matching Channels",
+                                  "Match texture features on this many principal components (0 = all channels)",
+                                  "speed", min=0, soft_max=256,
+                                  switch=("--full-matching", 0, "match on all channels, not 64 principal components"))
+    bank_cache: bool = setting(True, "Cache Texture Banks", "Keep texture banks on disk for the next run", "speed")
+    # -- stylise
+    stylise_steps: int = setting(200, "Steps", "Optimisation steps of the stylisation", "stylise", unit="steps",
+                                 min=0, soft_max=2000, flag="--steps")
+    lr: float = setting(0.02, "Learning Rate", "Step size on the splats' colours", "stylise", min=1e-6, soft_max=0.2)
+    stylised_sh_degree: int = setting(
+        0, "View-Dependent Colour", "Spherical-harmonic degree of restyled colours: 0 = the same from every side, "
+        "1-3 also train view-dependent bands", "stylise", min=0, max=3)
+    lambda_style: float = setting(1.0, "Texture Strength", "Weight of the texture loss", "stylise", min=0.0,
+                                  soft_max=10.0)
+    lambda_content: float = setting(
+        0.005, "Content Strength", "How strongly the original appearance is kept (paper: 0.005 forward-facing, "
+        "0.0005 all-around scenes)", "stylise", min=0.0, soft_max=0.05)
+    lambda_tv: float = setting(0.02, "Smoothness", "Weight of the image smoothness (total variation) term",
+                               "stylise", min=0.0, soft_max=1.0)
+    color_transfer: bool = setting(True, "Colour Transfer",
+                                   "Match the scene's colours to the texture's before and after", "stylise")
+    object_backdrop: bool = setting(
+        False, "Object Backdrop", "Stylise the object over its own mean colour, not the background, so the texture "
+        "does not trace its outline; the texture comes out weaker", "stylise")
+    stylise_geometry: bool = setting(
+        False, "Texture Moves Splats", "Let the texture loss move, scale and turn the splats too, as the paper's code "
+        "does: bolder texture, looser shape", "stylise")
+    densify: bool = setting(True, "Densify", "Add splats where the texture needs detail", "stylise")
+    densify_every: int = setting(25, "Densify Every", "Stylisation steps between densification events", "stylise",
+                                 unit="steps", min=1, soft_max=200)
+    densify_grad_threshold: float = setting(2e-4, "Densify Threshold",
+                                            "Colour gradient that makes a splat split or clone", "stylise", min=0.0,
+                                            soft_max=0.01)
+    densify_max_growth: float = setting(1.5, "Densify Growth Limit",
+                                        "No densification once the splat count has grown by this factor", "stylise",
+                                        min=1.0, soft_max=4.0)
+    seed: int = setting(0, "Seed", "Random seed of the run", "stylise", min=0)
+    # -- GT²
+    gt2: bool = setting(True, "GT² Loss",
+                        "Carry the texture's orientation from view to view (off: plain NNFM matching)", "gt2")
+    angle: float = setting(0.0, "Orientation", "Angle of the texture in the first view, counter-clockwise", "gt2",
+                           unit="°", min=-360.0, max=360.0)
+    lambda_prior: float = setting(0.002, "Orientation Prior",
+                                  "Cost per degree of turning the texture away from the previous views' angle",
+                                  "gt2", min=0.0, soft_max=100.0)
+    # -- AFCM
+    afcm: bool = setting(True, "Adaptive Control", "Weight the texture loss by depth, detail and distortion", "afcm")
+    lambda_depth: float = setting(0.8, "Depth Weight", "How much less the texture counts on far surfaces", "afcm",
+                                  min=0.0, max=1.0)
+    lambda_frequency: float = setting(0.8, "Detail Weight", "How much less the texture counts on detailed areas",
+                                      "afcm", min=0.0, max=1.0)
+    lambda_distortion: float = setting(0.25, "Distortion Weight",
+                                       "How much less the texture counts where it is seen at a grazing angle", "afcm",
+                                       min=0.0, max=1.0)
+    # -- GPB
+    gpb: bool = setting(True, "Geometry Preservation",
+                        "Alternate stylisation with phases that keep the geometry (off: faster)", "gpb")
+    rounds: int = setting(4, "Rounds", "Stylise/preserve alternations (the steps are split evenly)", "gpb", min=1,
+                          soft_max=20)
+    correct_steps: int = setting(100, "Preservation Steps", "Geometry preservation steps in all", "gpb",
+                                 unit="steps", min=0, soft_max=4000)
+    lambda_scale: float = setting(0.1, "Scale Regulariser", "Weight of the penalty on needle-like splats", "gpb",
+                                  min=0.0, soft_max=1.0)
+    scale_ratio_limit: float = setting(10.0, "Needle Limit",
+                                       "Largest/second splat scale ratio tolerated before it is penalised", "gpb",
+                                       min=1.0, soft_max=100.0)
+    scale_ratio_from_start: bool = setting(
+        True, "Keep Original Needles", "Tolerate each splat's own starting ratio if larger: only needles the "
+        "stylisation makes are penalised", "gpb")
+    # -- speed
+    skip_hidden: bool = setting(True, "Skip Hidden Splats",
+                                "Leave splats no view sees out of the optimisation (same result, faster)", "speed")
+    hidden_threshold: float = setting(0.1, "Hidden Below",
+                                      "A splat is hidden when all views together show less than this many pixels of "
+                                      "it", "speed", unit="px", min=0.0, soft_max=10.0)
+    skip_sh: bool = setting(True, "Skip Unused SH Bands",
+                            "Render the original only up to its highest spherical-harmonic band in use", "speed")
+    plateau_window: int = setting(16, "Plateau Window",
+                                  "Stop a phase when the mean loss of this many steps stops falling (0 = run all)",
+                                  "speed", unit="steps", min=0, soft_max=100,
+                                  switch=("--no-plateau-stop", 0, "run every step of every phase"))
+    plateau_tol: float = setting(0.01, "Plateau Tolerance",
+                                 "A phase has stopped falling when its loss drops by less than this fraction",
+                                 "speed", min=0.0, max=1.0)
+    reuse_content: bool = setting(True, "Reuse Content Renders",
+                                  "Reuse the last run's renders of the original (same scene and views)", "speed")
+    evaluate: bool = setting(True, "Measure Result", "Measure consistency, content and texture match at the end",
+                             "speed")
+    # -- machine
+    mixed_precision: bool = setting(True, "Mixed Precision",
+                                    "Run the feature network in float16 on a CUDA GPU (the CPU always uses float32)",
+                                    "machine", blender=IN_PREFERENCES)
+    features: str = setting("auto", "Feature Network", "Which feature network to use (auto: the best one found)",
+                            "machine", choices=("auto", "vgg16_relu3", "vgg19_norm_relu3"), blender=IN_PREFERENCES)
+    weights_path: str | None = setting(None, "Weights", "VGG weights file or folder (default: $GT2GS_WEIGHTS_DIR, "
+                                       "then torch's cache)", "machine", flag="--weights", blender=IN_PREFERENCES)
+    device: str = setting("auto", "Device", "Where the run computes: auto = CUDA when available", "machine",
+                          choices=("auto", "cpu", "cuda"), blender=IN_PREFERENCES)
+    threads: int = setting(0, "CPU Threads", "CPU threads for the run (0 = one per physical core); fewer keeps "
+                           "Blender responsive", "machine", min=0, soft_max=64, blender=IN_PREFERENCES)
+    backend: str = setting("auto", "Rasterizer", "Rasterizer backend (auto = the fastest available)", "machine",
+                           choices=("auto", "torch", "cpu", "gsplat"), blender=IN_PREFERENCES)
+    cache_dir: str | None = setting(None, "Bank Cache Folder", "Where texture banks are cached (default: "
+                                    "$GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)", "machine",
+                                    blender=IN_PREFERENCES)
+    preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1,
+                                 internal=True)
 
     def __post_init__(self) -> None:
         positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every", "rounds",
@@ -103,19 +233,44 @@ class TransferConfig:
             raise ValueError(f"threads must be >= 0 (0 = one per physical core), got {self.threads}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
-        if self.device not in ("auto", "cpu", "cuda"):
-            raise ValueError(f"device must be auto, cpu or cuda, got {self.device!r}")
+        for name in ("device", "features", "backend"):
+            choices = SETTINGS[name].choices
+            if getattr(self, name) not in choices:
+                raise ValueError(f"{name} must be one of {', '.join(choices)}, got {getattr(self, name)!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
-    def with_overrides(self, **overrides: Any) -> "TransferConfig":
+    def with_overrides(self, **overrides: Any) -> TransferConfig:
         """A copy with the given fields changed (None values are ignored: 'not given')."""
         known = {f.name for f in fields(self)}
         unknown = set(overrides) - known
         if unknown:
             raise ValueError(f"unknown transfer settings: {', '.join(sorted(unknown))}")
         return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+
+
+SETTINGS: dict[str, Setting] = {f.name: f.metadata["setting"] for f in fields(TransferConfig)}
+"""Every setting's meaning, by field name."""
+
+
+def user_settings(where: str | None = None) -> Iterator[tuple[str, Setting, type]]:
+    """(name, setting, Python type) of the settings users set, in part order; ``where``: only those Blender
+    offers there (IN_SCENE or IN_PREFERENCES)."""
+    types = {f.name: f.type for f in fields(TransferConfig)}
+    for part in PARTS:
+        for name, meta in SETTINGS.items():
+            if meta.part == part and not meta.internal and (where is None or meta.blender == where):
+                yield name, meta, _python_type(types[name])
+
+
+def _python_type(annotation: Any) -> type:
+    """The value type of a field annotation (a string under ``from __future__ import annotations``)."""
+    text = str(annotation)
+    for name, kind in (("tuple", tuple), ("bool", bool), ("int", int), ("float", float), ("str", str)):
+        if text.startswith(name):
+            return kind
+    raise TypeError(f"unsupported setting type {annotation!r}")
 
 
 PAPER_SCHEDULE: dict[str, Any] = dict(
@@ -148,10 +303,23 @@ donut, 16 views at 256 px: 300 + 150 steps and 72 angles bring texture match wit
 ``balanced`` where the defaults' 200 + 100 steps and 36 angles stayed 10 % off, bench/tradeoff.py),
 ``balanced`` more views, resolution and texture orientations; ``paper-llff`` and ``paper-360`` are
 the paper's settings exactly (hours on a CPU: meant for a GPU)."""
+DEFAULT_PRESET = "fast"
+PRESET_HELP = {
+    "preview": "A first look in seconds",
+    "fast": "A usable result in minutes on a CPU",
+    "balanced": "More views, resolution and texture orientations",
+    "paper-llff": "The paper's settings for forward-facing scenes (hours on a CPU: meant for a GPU)",
+    "paper-360": "The paper's settings for all-around scenes (hours on a CPU: meant for a GPU)",
+}
 
 
-def preset(name: str, **overrides: Any) -> "TransferConfig":
+def preset(name: str, **overrides: Any) -> TransferConfig:
     """The named preset with optional overrides."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     return PRESETS[name].with_overrides(**overrides)
+
+
+def paper_value(name: str) -> Any:
+    """The paper's value of a setting (its ``paper-llff`` preset), for help texts."""
+    return getattr(PRESETS["paper-llff"], name)

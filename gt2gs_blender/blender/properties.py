@@ -1,0 +1,89 @@
+"""Blender properties generated from the transfer settings' metadata (``core/transfer/config.py``).
+
+Each user setting becomes a property of the scene's GT² settings or of the add-on preferences, with
+the setting's label, tooltip, unit and range; its default is the default preset's value. Choosing a
+preset writes that preset's values into the scene's properties, so the panel always shows what a run
+will use, and ``config_values`` reads them back into the config by the same names.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from typing import Any
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
+
+from ..core.transfer.config import DEFAULT_PRESET, IN_SCENE, PRESETS, Setting, user_settings
+
+DEFAULTS = PRESETS[DEFAULT_PRESET]
+PATH_SETTINGS = {"weights_path": "Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth) or "
+                                 "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"}
+"""Path settings whose tooltip in Blender says more than the command line's."""
+
+
+def annotations(where: str, updates: dict[str, Callable] | None = None) -> dict[str, Any]:
+    """Property definitions for the settings Blender offers in ``where`` (IN_SCENE or IN_PREFERENCES);
+    ``updates``: a callback per setting name, called when the user changes it."""
+    updates = updates or {}
+    return {name: _property(name, meta, kind, updates.get(name)) for name, meta, kind in user_settings(where)}
+
+
+def _property(name: str, meta: Setting, kind: type, update: Callable | None) -> Any:
+    """One bpy property for a setting of Python type ``kind``."""
+    unit = f" ({meta.unit})" if meta.unit and meta.unit != "steps" else ""
+    common: dict[str, Any] = {"name": meta.label, "description": PATH_SETTINGS.get(name, meta.help + unit)}
+    if update is not None:
+        common["update"] = update
+    default = getattr(DEFAULTS, name)
+    if kind is bool:
+        return BoolProperty(default=default, **common)
+    if kind is tuple:
+        return FloatVectorProperty(default=default, size=len(default), subtype="COLOR", min=0.0, max=1.0, **common)
+    if meta.choices:
+        items = tuple((choice, choice.replace("_", " ").title(), "") for choice in meta.choices)
+        return EnumProperty(items=items, default=default, **common)
+    if kind is str:
+        return StringProperty(default=default or "", subtype="DIR_PATH", **common)
+    return (IntProperty if kind is int else FloatProperty)(default=default, **_limits(meta, kind), **common)
+
+
+def _limits(meta: Setting, kind: type) -> dict[str, Any]:
+    """min / max / soft_max keywords of a number property (and a precision that shows small weights)."""
+    limits = {key: kind(value) for key, value in (("min", meta.min), ("max", meta.max), ("soft_max", meta.soft_max))
+              if value is not None}
+    if kind is float:
+        limits["precision"] = 4
+    return limits
+
+
+def config_values(owner: Any, where: str) -> dict[str, Any]:
+    """The settings ``owner`` (scene settings or preferences) holds, as the config takes them."""
+    return {name: _value(getattr(owner, name), meta, kind) for name, meta, kind in user_settings(where)}
+
+
+def _value(value: Any, meta: Setting, kind: type) -> Any:
+    """A property's value as the config's type: colours as tuples, paths absolute (empty: None), and numbers
+    as the decimal the user typed (Blender keeps float32: 0.02 would reach the engine as 0.0199999996)."""
+    if kind is tuple:
+        return tuple(_decimal(v) for v in value)
+    if kind is float:
+        return _decimal(value)
+    if kind is str and not meta.choices:
+        return os.path.abspath(bpy.path.abspath(value)) if value else None
+    return value
+
+
+def apply_preset(owner: Any, name: str) -> None:
+    """Write preset ``name``'s values into the scene settings ``owner``."""
+    values = PRESETS[name]
+    for setting, meta, kind in user_settings(IN_SCENE):
+        value = getattr(values, setting)
+        setattr(owner, setting, "" if value is None and kind is str else value)
+
+
+def _decimal(value: float) -> float:
+    """The shortest decimal that a float32 property value stands for, as a Python float."""
+    return float(str(np.float32(value)))

@@ -1,0 +1,68 @@
+"""Every transfer setting is written once (core/transfer/config.py) and reaches the command line from there."""
+
+from __future__ import annotations
+
+import pytest
+
+from gt2gs_blender.app.cli import main as cli
+from gt2gs_blender.app.cli.options import config_from_args, flag
+from gt2gs_blender.core.features.weights import PREFERENCES
+from gt2gs_blender.core.render import BACKENDS
+from gt2gs_blender.core.transfer.config import PARTS, PRESETS, SETTINGS, TransferConfig, user_settings
+
+
+def transfer_help(capsys) -> str:
+    assert cli.main(["transfer", "--help"]) == 0
+    return capsys.readouterr().out
+
+
+def test_every_setting_has_a_cli_flag_unless_internal(capsys):
+    text = transfer_help(capsys)
+    missing = [name for name, meta in SETTINGS.items() if not meta.internal and flag(name, meta) not in text]
+    assert not missing, f"settings without a --flag in `transfer --help`: {missing}"
+
+
+def test_every_setting_has_metadata_a_user_can_read():
+    for name, meta in SETTINGS.items():
+        assert meta.part in PARTS, name
+        assert meta.label and meta.help and not meta.help.endswith("."), name
+        assert meta.min is None or meta.max is None or meta.min <= meta.max, name
+
+
+def test_every_presets_value_lies_in_its_settings_range():
+    for preset_name, config in PRESETS.items():
+        for name, meta, _ in user_settings():
+            value = getattr(config, name)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                assert meta.min is None or value >= meta.min, (preset_name, name, value)
+                assert meta.max is None or value <= meta.max, (preset_name, name, value)
+            if meta.choices:
+                assert value in meta.choices, (preset_name, name, value)
+
+
+def test_choices_are_the_engines_own():
+    assert SETTINGS["backend"].choices == ("auto", *BACKENDS)
+    assert SETTINGS["features"].choices == PREFERENCES
+
+
+@pytest.mark.parametrize("argv, expected", [
+    ((), {}),
+    (("--steps", "12", "--no-gpb", "--angle", "30", "--background", "0,0.5,1"),
+     {"stylise_steps": 12, "gpb": False, "angle": 30.0, "background": (0.0, 0.5, 1.0)}),
+    (("--no-plateau-stop", "--full-matching", "--stylise-geometry", "--lambda-prior", "0.01"),
+     {"plateau_window": 0, "match_channels": 0, "stylise_geometry": True, "lambda_prior": 0.01}),
+    (("--preset", "preview", "--weights", "w.pth", "--threads", "2"),
+     {"weights_path": "w.pth", "threads": 2}),
+])
+def test_cli_options_become_the_config(argv, expected):
+    parser = cli.build_parser()
+    args = parser.parse_args(["transfer", "s.ply", "t.jpg", "-o", "o.ply", *argv])
+    assert config_from_args(args) == PRESETS[args.preset].with_overrides(**expected)
+
+
+def test_an_out_of_range_setting_is_one_user_error(capsys, tmp_path):
+    code = cli.main(["transfer", str(tmp_path / "s.ply"), str(tmp_path / "t.jpg"), "-o", str(tmp_path / "o.ply"),
+                     "--device", "tpu"])
+    assert code == 2 and "invalid choice" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="features must be one of"):
+        TransferConfig(features="alexnet")
