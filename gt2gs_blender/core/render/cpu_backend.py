@@ -1,35 +1,19 @@
-"""The fast CPU backend: a small C++/OpenMP kernel compiled once with torch.utils.cpp_extension."""
+"""The fast CPU backend: a small C++/OpenMP kernel, compiled once per content (see kernel_cache)."""
 from __future__ import annotations
 
 import logging
-import os
 import threading
-from pathlib import Path
 from types import ModuleType
 
 import torch
 
+from . import kernel_cache
 from .binning import TileBins
 from .projection import Projection, tile_grid, with_depth_channel
 
 log = logging.getLogger(__name__)
-_SOURCES = [Path(__file__).with_name("csrc") / name for name in ("raster_cpu.cpp", "project_cpu.cpp")]
 _lock = threading.Lock()
 _state: dict[str, object] = {}
-
-
-def vector_flags() -> list[str]:
-    """Compiler flags for the kernel's 8-lane vectors: AVX2 where torch reports the CPU has it (else
-    the compiler splits them into pairs of SSE/NEON registers, slower but correct)."""
-    return ["-mavx2"] if torch.backends.cpu.get_cpu_capability() in ("AVX2", "AVX512") else []
-
-
-def build_dir() -> Path:
-    """Where the compiled kernel is cached (per user, torch version and vector flags); GT2GS_BUILD_DIR
-    overrides the base."""
-    base = os.environ.get("GT2GS_BUILD_DIR") or Path.home() / ".cache" / "gt2gs_blender"
-    tag = torch.__version__.replace("+", "_") + "".join(vector_flags()).replace("-m", "-")
-    return Path(base) / f"raster_cpu-torch{tag}"
 
 
 def load_kernel() -> ModuleType | None:
@@ -49,22 +33,11 @@ def unavailable_reason() -> str | None:
 
 
 def _compile() -> tuple[ModuleType | None, str | None]:
-    from torch.utils import cpp_extension
-
-    directory = build_dir()
+    """The kernel from its content-keyed cache (see kernel_cache), or None and why not."""
     try:
-        directory.mkdir(parents=True, exist_ok=True)
-        module = cpp_extension.load(
-            name="gt2gs_raster_cpu",
-            sources=[str(p) for p in _SOURCES],
-            build_directory=str(directory),
-            extra_cflags=["-O3", "-fopenmp", "-ffp-contract=off", *vector_flags()],
-            extra_ldflags=["-fopenmp"],
-            verbose=False,
-        )
+        return kernel_cache.load(), None
     except Exception as exc:  # compiler, ninja or headers missing: fall back, never fail the render
         return None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else exc}"
-    return module, None
 
 
 def bin_entries(proj: Projection, n_cams: int, width: int, height: int) -> TileBins:
