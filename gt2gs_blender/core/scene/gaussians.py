@@ -12,25 +12,11 @@ from typing import Iterable
 import numpy as np
 import torch
 
-SH_C0 = 0.28209479177387814
-"""Degree-0 real spherical-harmonic constant: colour = 0.5 + SH_C0 * f_dc."""
+from .inria import SH_C0, sh_coeff_count, sh_degree_from_rest
 
 LOG_SCALE_MAX = 88.0
 """Log-scales are clamped here before ``exp``: exp(88) ~ 1.7e38 is the largest float32 power of e, so a
 scale never overflows to Inf (whose gradient, 0 * Inf, would be NaN)."""
-
-
-def sh_coeff_count(degree: int) -> int:
-    """Number of SH coefficients per colour channel for a degree (1, 4, 9, 16)."""
-    return (degree + 1) ** 2
-
-
-def sh_degree_from_rest(n_rest_per_channel: int) -> int:
-    """SH degree from the number of f_rest coefficients per channel (0, 3, 8 or 15)."""
-    for degree in range(4):
-        if sh_coeff_count(degree) - 1 == n_rest_per_channel:
-            return degree
-    raise ValueError(f"{n_rest_per_channel} f_rest coefficients per channel is not an SH degree 0-3 layout")
 
 
 @dataclass

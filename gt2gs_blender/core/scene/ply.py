@@ -31,14 +31,11 @@ import numpy as np
 from ..errors import PlyFormatError
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
+from .inria import REQUIRED, REST_PREFIX, core_groups, rest_per_channel, tensor_view
 from .ply_header import FORMATS, HEADER_LIMIT, PathLike, PlyElement, PlyHeader, SCALAR_TYPES, _open, _parse_header, _read
 
 
 _STRUCT_CHAR = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
-
-
-_REQUIRED = ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity",
-             "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
 
 
 @dataclass
@@ -99,17 +96,16 @@ def _check_gaussian_layout(path: PathLike, header: PlyHeader) -> int:
         raise PlyFormatError(path, f"vertex list properties are not supported ({', '.join(lists)}); "
                                    "3DGS vertices have scalar properties only")
     types = {p.name: p.type for p in props}
-    missing = [name for name in _REQUIRED if name not in types]
+    missing = [name for name in REQUIRED if name not in types]
     if missing:
         raise PlyFormatError(path, f"missing required properties {', '.join(missing)} "
                                    "(not a 3D Gaussian Splatting PLY?)")
-    rest = [p.name for p in props if p.name.startswith("f_rest_")]
-    k = len(rest) // 3
-    if len(rest) not in (3 * ((d + 1) ** 2 - 1) for d in range(4)) or \
-            set(rest) != {f"f_rest_{i}" for i in range(len(rest))}:
+    rest = [p.name for p in props if p.name.startswith(REST_PREFIX)]
+    k = rest_per_channel(rest)
+    if k is None:
         raise PlyFormatError(path, f"{len(rest)} f_rest properties do not form an SH degree 0-3 layout "
                                    "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
-    not_float = [f"{name} ({types[name]})" for name in (*_REQUIRED, *rest) if SCALAR_TYPES[types[name]][0] != "f"]
+    not_float = [f"{name} ({types[name]})" for name in (*REQUIRED, *rest) if SCALAR_TYPES[types[name]][0] != "f"]
     if not_float:
         raise PlyFormatError(path, f"Gaussian properties must be float or double: {', '.join(not_float)}")
     return k
@@ -235,28 +231,6 @@ def _ascii_column(path: PathLike, name: str, ply_type: str, column: np.ndarray) 
     return column
 
 
-def _core_groups(k: int) -> dict[str, list[str]]:
-    """Scene tensor -> its PLY properties in canonical INRIA order (f_rest channel-major)."""
-    return {
-        "means": ["x", "y", "z"],
-        "sh_dc": [f"f_dc_{i}" for i in range(3)],
-        "sh_rest": [f"f_rest_{i}" for i in range(3 * k)],
-        "opacity_logits": ["opacity"],
-        "log_scales": [f"scale_{i}" for i in range(3)],
-        "quats": [f"rot_{i}" for i in range(4)],
-    }
-
-
-def _tensor_view(key: str, storage: np.ndarray) -> np.ndarray:
-    """View (N, columns) in PLY order with the shape of scene tensor ``key``: sh_rest (N,3K) -> (N,K,3)."""
-    n = storage.shape[0]
-    if key == "sh_rest":
-        return storage.reshape(n, 3, storage.shape[1] // 3).transpose(0, 2, 1)
-    if key == "opacity_logits":
-        return storage.reshape(n)
-    return storage
-
-
 def _field_block(records: np.ndarray, names: list[str]) -> np.ndarray | None:
     """An (N, len(names)) view of the fields when they are consecutive and of one type (the usual case)."""
     if not names or not len(records):
@@ -276,7 +250,7 @@ def _read_group(records: np.ndarray, key: str, names: list[str]) -> np.ndarray:
         storage = np.empty((len(records), len(names)), np.float32)
         for i, name in enumerate(names):
             storage[:, i] = records[name]
-    view = _tensor_view(key, storage)
+    view = tensor_view(key, storage)
     out = np.empty(view.shape, np.float32)
     np.copyto(out, view)
     return out
@@ -285,7 +259,7 @@ def _read_group(records: np.ndarray, key: str, names: list[str]) -> np.ndarray:
 def _arrays_from_records(
     path: PathLike, header: PlyHeader, records: np.ndarray, k: int, drop_invalid: bool,
 ) -> SplatArrays:
-    groups = _core_groups(k)
+    groups = core_groups(k)
     with np.errstate(over="ignore"):  # double values beyond float32 become Inf, reported below
         arrays = {key: _read_group(records, key, names) for key, names in groups.items()}
     core = {name for names in groups.values() for name in names}

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, BinaryIO
 from ..errors import PlyFormatError
 if TYPE_CHECKING:
-    pass
+    import numpy as np
 
 
 PathLike = str | os.PathLike
@@ -29,6 +29,16 @@ SCALAR_TYPES = {
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
 """PLY scalar type names (classic and sized aliases) -> numpy type codes."""
+
+
+TYPE_FOR_CODE = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort",
+                 "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+"""numpy type code -> the classic PLY type name written for it (the types PLY can store)."""
+
+
+def type_code(dtype: np.dtype) -> str:
+    """The numpy type code of ``dtype`` without byte order ('f4', 'u1', ...), the key of TYPE_FOR_CODE."""
+    return f"{dtype.kind}{dtype.itemsize}"
 
 
 _PROPERTY_NAME = re.compile(r"[!-~]+")

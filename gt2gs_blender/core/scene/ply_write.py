@@ -7,12 +7,9 @@ import numpy as np
 from ..atomic import atomic_write
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
-from .ply_header import FORMATS, PathLike, SCALAR_TYPES, _PROPERTY_NAME
-from .ply import SplatArrays, _core_groups, _field_block, _record_dtype, _tensor_view
-
-
-_TYPE_FOR_CODE = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort",
-                  "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+from .inria import NORMAL_NAMES, REST_PREFIX, core_groups, core_property_names, tensor_view
+from .ply_header import FORMATS, PathLike, SCALAR_TYPES, TYPE_FOR_CODE, _PROPERTY_NAME, type_code
+from .ply import SplatArrays, _field_block, _record_dtype
 
 
 _ASCII_FORMAT = {"f4": "%.9g", "f8": "%.17g"}  # enough digits to read back exactly; integers use %d
@@ -22,7 +19,7 @@ def write_ply(path: PathLike, scene: GaussianScene | SplatArrays, *, fmt: str = 
     """Write a scene (torch ``GaussianScene`` or numpy ``SplatArrays``) atomically; it is not modified."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown PLY format {fmt!r}; use one of {', '.join(FORMATS)}")
-    layout = _write_layout(scene)
+    layout = write_layout(scene)
     records = _records(scene, layout, FORMATS[fmt])
     header = "".join(
         ["ply\n", f"format {fmt} 1.0\n", f"element vertex {len(scene)}\n",
@@ -32,35 +29,32 @@ def write_ply(path: PathLike, scene: GaussianScene | SplatArrays, *, fmt: str = 
     atomic_write(Path(path), (header, body))
 
 
-def _write_layout(scene: GaussianScene | SplatArrays) -> tuple[tuple[str, str], ...]:
-    """The scene's own layout if it still fits the scene, else the canonical INRIA order."""
-    core = [name for names in _core_groups(int(scene.sh_rest.shape[1])).values() for name in names]
+def write_layout(scene: GaussianScene | SplatArrays) -> tuple[tuple[str, str], ...]:
+    """The (property, PLY type) that ``write_ply`` writes: the scene's own layout if it still fits the
+    scene, else the canonical INRIA order. ``ValueError`` for extras PLY cannot hold."""
+    core = core_property_names(int(scene.sh_rest.shape[1]))
     _check_extras(scene, set(core))
     layout = scene.ply_layout
     if layout is not None and _layout_fits(layout, scene, set(core)):
         return tuple(layout)
-    normals = [name for name in ("nx", "ny", "nz") if name in scene.extras]
+    normals = [name for name in NORMAL_NAMES if name in scene.extras]
     order = [*core[:3], *normals, *core[3:]]
     order += [name for name in scene.extras if name not in order]
-    return tuple((name, _TYPE_FOR_CODE[_code(scene.extras[name].dtype)] if name in scene.extras else "float")
+    return tuple((name, TYPE_FOR_CODE[type_code(scene.extras[name].dtype)] if name in scene.extras else "float")
                  for name in order)
-
-
-def _code(dtype: np.dtype) -> str:
-    return f"{dtype.kind}{dtype.itemsize}"
 
 
 def _check_extras(scene: GaussianScene | SplatArrays, core: set[str]) -> None:
     for name, values in scene.extras.items():
         if not isinstance(name, str) or not _PROPERTY_NAME.fullmatch(name):
             raise ValueError(f"extra property name {name!r} is not a PLY name (printable ASCII, no spaces)")
-        if name in core or name.startswith("f_rest_"):
+        if name in core or name.startswith(REST_PREFIX):
             raise ValueError(f"extra property {name!r} clashes with a Gaussian parameter")
         if not isinstance(values, np.ndarray) or values.shape != (len(scene),):
             raise ValueError(f"extra property {name!r} must be a numpy array of shape ({len(scene)},)")
-        if _code(values.dtype) not in _TYPE_FOR_CODE:
+        if type_code(values.dtype) not in TYPE_FOR_CODE:
             raise ValueError(f"extra property {name!r} has dtype {values.dtype}, which PLY cannot store "
-                             f"(use one of {', '.join(_TYPE_FOR_CODE)})")
+                             f"(use one of {', '.join(TYPE_FOR_CODE)})")
 
 
 def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene | SplatArrays, core: set[str]) -> bool:
@@ -69,7 +63,7 @@ def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene | Spl
         return False
     for name, ply_type in layout:
         code = SCALAR_TYPES.get(ply_type)
-        wanted = ("f4", "f8") if name in core else (_code(scene.extras[name].dtype),)
+        wanted = ("f4", "f8") if name in core else (type_code(scene.extras[name].dtype),)
         if code not in wanted:
             return False
     return True
@@ -79,7 +73,7 @@ def _records(scene: GaussianScene | SplatArrays, layout: tuple[tuple[str, str], 
     """The vertex records of ``scene`` as a structured array in ``layout``."""
     records = np.empty(len(scene), _record_dtype(layout, byte_order))
     with np.errstate(over="ignore"):
-        for key, names in _core_groups(int(scene.sh_rest.shape[1])).items():
+        for key, names in core_groups(int(scene.sh_rest.shape[1])).items():
             _write_group(records, key, names, _float_array(scene.tensors()[key]))
         for name in scene.extras:
             records[name] = scene.extras[name]
@@ -97,10 +91,10 @@ def _write_group(records: np.ndarray, key: str, names: list[str], values: np.nda
     """Store scene tensor ``values`` into its fields, in one pass when they are consecutive."""
     block = _field_block(records, names)
     if block is not None:
-        np.copyto(_tensor_view(key, block), values)
+        np.copyto(tensor_view(key, block), values)
         return
     storage = np.empty((len(records), len(names)), values.dtype)
-    np.copyto(_tensor_view(key, storage), values)
+    np.copyto(tensor_view(key, storage), values)
     for i, name in enumerate(names):
         records[name] = storage[:, i]
 
