@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 import numpy as np
 from ..errors import CameraFileError
+from ..rotations import DEGENERATE_NORM, quats_to_matrices
 from .camera import Camera
 
 
@@ -107,26 +108,15 @@ def _colmap_intrinsics(
 
 def _colmap_camera(path: Path, intr: _ColmapIntrinsics, qvec: np.ndarray, tvec: np.ndarray, name: str) -> Camera:
     """A Camera from COLMAP intrinsics and a world->camera quaternion (w, x, y, z) + translation."""
-    norm = np.linalg.norm(qvec)
-    if not (np.all(np.isfinite(qvec)) and norm > 1e-12):
+    if not (np.all(np.isfinite(qvec)) and np.linalg.norm(qvec) > DEGENERATE_NORM):
         raise CameraFileError(path, f"image {name!r} has an invalid quaternion {qvec.tolist()}")
     viewmat = np.eye(4)
-    viewmat[:3, :3] = _quat_to_rotmat(qvec / norm)
+    viewmat[:3, :3] = quats_to_matrices(qvec)
     viewmat[:3, 3] = tvec
     try:
         return Camera(viewmat, intr.fx, intr.fy, intr.cx, intr.cy, intr.width, intr.height, name)
     except ValueError as exc:
         raise CameraFileError(path, f"image {name!r}: {exc}") from exc
-
-
-def _quat_to_rotmat(q: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
 
 
 # -- text --------------------------------------------------------------------------------------------
