@@ -1,4 +1,4 @@
-"""Gaussian scenes as Blender point-cloud objects, and back.
+"""Gaussian scenes (core ``SplatArrays``, numpy) as Blender point-cloud objects, and back.
 
 One point per Gaussian. Every PLY vertex property is a POINT attribute named as in the file (INRIA
 names: ``f_dc_0``, ``f_rest_*``, ``opacity``, ``scale_*``, ``rot_*``, normals, extras); x, y, z are
@@ -22,12 +22,16 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 from dataclasses import dataclass
 
 import bpy
 import numpy as np
 
+from ..core.scene import inria
+from ..core.scene.inria import POSITION_NAMES, REST_PREFIX, SH_C0, core_groups, core_property_names, tensor_view
+from ..core.scene.ply import SplatArrays
+from ..core.scene.ply_header import SCALAR_TYPES, TYPE_FOR_CODE, type_code
+from ..core.scene.ply_write import write_layout
 from . import transform
 
 COLOR_ATTRIBUTE = "Col"
@@ -42,21 +46,12 @@ MAX_ATTRIBUTE_NAME = 63
 RADIUS_MAX_FRACTION = 0.05
 """Largest display radius as a fraction of the scene's (1%-99% quantile) bounding-box diagonal."""
 
-SH_C0 = 0.28209479177387814
-REQUIRED = ("f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
-            "rot_0", "rot_1", "rot_2", "rot_3")
+REQUIRED = tuple(name for name in inria.REQUIRED if name not in POSITION_NAMES)
 """Point attributes (besides positions) that make a point cloud a splat object."""
 RESERVED = frozenset({POSITION_ATTRIBUTE, RADIUS_ATTRIBUTE, COLOR_ATTRIBUTE})
 
-_INT_CODES = {"i1", "u1", "i2", "u2", "i4", "u4"}
-_FLOAT_CODES = {"f4", "f8"}
-_PLY_TYPE_CODE = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
-_TYPE_FOR_CODE = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort",
-                  "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+_FLOAT_CODES = {code for code in TYPE_FOR_CODE if code[0] == "f"}
+_INT_CODES = set(TYPE_FOR_CODE) - _FLOAT_CODES
 
 
 class SplatObjectError(ValueError):
@@ -66,13 +61,6 @@ class SplatObjectError(ValueError):
 # -- naming -------------------------------------------------------------------------------------------
 
 
-def core_property_names(sh_rest_per_channel: int) -> list[str]:
-    """The Gaussian parameters' PLY names in canonical INRIA order (positions first)."""
-    return ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2",
-            *(f"f_rest_{i}" for i in range(3 * sh_rest_per_channel)),
-            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
-
-
 def attribute_name_for(prop: str) -> str:
     """The point attribute that holds PLY property ``prop``."""
     if prop in RESERVED or prop.startswith(".") or prop.startswith(RENAME_PREFIX):
@@ -80,11 +68,11 @@ def attribute_name_for(prop: str) -> str:
     return prop
 
 
-# -- GaussianScene -> object --------------------------------------------------------------------------
+# -- SplatArrays -> object -----------------------------------------------------------------------------
 
 
 def scene_to_object(
-    scene,
+    scene: SplatArrays,
     name: str,
     collection: bpy.types.Collection,
     *,
@@ -92,7 +80,7 @@ def scene_to_object(
     source_format: str | None = None,
     with_material: bool = True,
 ) -> bpy.types.Object:
-    """A new point-cloud object for ``scene`` (a core ``GaussianScene``), linked into ``collection``.
+    """A new point-cloud object for ``scene`` (core ``SplatArrays``), linked into ``collection``.
 
     Needs a context with a scene and view layer (Blender converts mesh -> point cloud with its
     operator). On failure nothing is left behind.
@@ -109,15 +97,14 @@ def scene_to_object(
         mesh = bpy.data.meshes.new(name)
         created.append(mesh)
         mesh.vertices.add(n)
-        means = _np(scene.means)
-        mesh.vertices.foreach_set("co", np.ascontiguousarray(means, np.float32).ravel())
+        mesh.vertices.foreach_set("co", np.ascontiguousarray(scene.means, np.float32).ravel())
         for prop, values in columns.items():
             kind = "INT" if values.dtype == np.int32 else "FLOAT"
             attr = mesh.attributes.new(attribute_name_for(prop), kind, "POINT")
             attr.data.foreach_set("value", values)
-        colors = splat_colors(_np(scene.sh_dc), _np(scene.opacity_logits))
+        colors = splat_colors(scene.sh_dc, scene.opacity_logits)
         mesh.attributes.new(COLOR_ATTRIBUTE, "FLOAT_COLOR", "POINT").data.foreach_set("color", colors.ravel())
-        radii = display_radii(_np(scene.log_scales), means)
+        radii = display_radii(scene.log_scales, scene.means)
         mesh.attributes.new(RADIUS_ATTRIBUTE, "FLOAT", "POINT").data.foreach_set("value", radii)
 
         obj = bpy.data.objects.new(name, mesh)
@@ -149,39 +136,31 @@ def scene_to_object(
         raise
 
 
-def _scene_columns(scene) -> tuple[dict[str, np.ndarray], list[list[str]]]:
-    """PLY property -> contiguous 1-D attribute values (float32 or int32), in file order; and the layout."""
-    rest = _np(scene.sh_rest)
-    n, k = rest.shape[:2]
-    groups = {
-        "f_dc_": np.ascontiguousarray(_np(scene.sh_dc).T),
-        "f_rest_": np.ascontiguousarray(rest.transpose(2, 1, 0)).reshape(3 * k, n),  # channel-major
-        "scale_": np.ascontiguousarray(_np(scene.log_scales).T),
-        "rot_": np.ascontiguousarray(_np(scene.quats).T),
-    }
-    core: dict[str, np.ndarray] = {"opacity": np.ascontiguousarray(_np(scene.opacity_logits).reshape(-1))}
-    for prefix, rows in groups.items():
-        for i, row in enumerate(rows):
-            core[f"{prefix}{i}"] = row
-    core = {p: v.astype(np.float32, copy=False) for p, v in core.items()}
-    extras = {p: _attribute_values(np.asarray(v)) for p, v in scene.extras.items()}
+def _scene_columns(scene: SplatArrays) -> tuple[dict[str, np.ndarray], tuple[tuple[str, str], ...]]:
+    """PLY property -> contiguous 1-D attribute values (float32 or int32) in file order, positions left
+    out; and the layout (property, PLY type) that core's ``write_ply`` would write for ``scene``."""
+    try:
+        layout = write_layout(scene)
+    except ValueError as exc:  # extras PLY cannot hold
+        raise SplatObjectError(str(exc)) from None
+    values = {**_parameter_columns(scene), **{p: _attribute_values(np.asarray(v)) for p, v in scene.extras.items()}}
+    return {prop: values[prop] for prop, _ in layout if prop not in POSITION_NAMES}, layout
 
-    source = [[str(p), str(t)] for p, t in scene.ply_layout or ()]
-    if source and sorted(p for p, _ in source) == sorted(["x", "y", "z", *core, *extras]):
-        layout = source
-    else:  # no layout, or one the scene no longer fits: canonical INRIA order, as core writes it
-        names = core_property_names(k)
-        normals = [p for p in ("nx", "ny", "nz") if p in extras]
-        order = names[:3] + normals + names[3:] + [p for p in extras if p not in normals]
-        layout = [[p, "float" if p not in scene.extras else _TYPE_FOR_CODE[_code(scene.extras[p].dtype)]]
-                  for p in order]
-    columns = {prop: core[prop] if prop in core else extras[prop] for prop, _ in layout
-               if prop not in ("x", "y", "z")}
-    return columns, layout
+
+def _parameter_columns(scene: SplatArrays) -> dict[str, np.ndarray]:
+    """The Gaussian parameters but the positions as PLY property -> contiguous float32 row."""
+    columns: dict[str, np.ndarray] = {}
+    for key, names in core_groups(int(scene.sh_rest.shape[1])).items():
+        if key != "means":
+            rows = np.empty((len(names), len(scene)), np.float32)
+            np.copyto(tensor_view(key, rows.T), scene.tensors()[key])
+            columns.update(zip(names, rows))
+    return columns
 
 
 def _attribute_values(values: np.ndarray) -> np.ndarray:
-    code = _code(values.dtype)
+    """A PLY property's values as a Blender attribute holds them: float32, or int32 (uint32 bit for bit)."""
+    code = type_code(values.dtype)
     if code in _FLOAT_CODES:
         return np.ascontiguousarray(values, np.float32)
     if code == "u4":
@@ -275,7 +254,7 @@ def ensure_material() -> tuple[bpy.types.Material, bool]:
     return material, True
 
 
-# -- object -> GaussianScene ----------------------------------------------------------------------------
+# -- object -> SplatArrays -------------------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -305,88 +284,78 @@ def splat_summary(obj) -> SplatSummary | None:
     cloud = obj.data
     meta = get_meta(cloud)
     k = _rest_per_channel(cloud.attributes)
-    degree = int(round(math.sqrt(k + 1))) - 1 if k is not None else -1
+    degree = inria.sh_degree_from_rest(k) if k is not None else -1
     extras = tuple(prop for prop, _ in _export_properties(cloud, meta, k or 0)[2])
     return SplatSummary(name=obj.name, count=len(cloud.points), sh_degree=degree, extras=extras,
                         source=meta.get("source"), format=meta.get("format"))
 
 
-def object_to_scene(obj, *, bake_transform: bool = False):
+def object_to_scene(obj, *, bake_transform: bool = False) -> tuple[SplatArrays, list[str]]:
     """The object's Gaussians as core ``SplatArrays`` (numpy; no torch needed), and notes for the user.
 
     With ``bake_transform`` the object's world matrix is baked into the Gaussians (see ``transform``);
     otherwise they stay in the object's local space, exactly as stored.
     """
-    from ..core.scene.ply import SplatArrays
-
     if not is_splat_object(obj):
         raise SplatObjectError(f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "
                                f"(needs the attributes {', '.join(REQUIRED)})")
     cloud = obj.data
-    meta = get_meta(cloud)
-    attributes = cloud.attributes
-    n = len(cloud.points)
-    k = _rest_per_channel(attributes)
+    k = _rest_per_channel(cloud.attributes)
     if k is None:
         raise SplatObjectError(f"{obj.name!r}: the f_rest_* attributes do not form an SH degree 0-3 set "
                                "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
-    layout, notes, extras_props = _export_properties(cloud, meta, k)
-
-    means = np.empty(n * 3, np.float32)
-    if n:  # an empty point cloud has no position attribute
-        attributes[POSITION_ATTRIBUTE].data.foreach_get("vector", means)
-    means = means.reshape(n, 3)
-
-    def block(names: list[str]) -> np.ndarray:
-        out = np.empty((len(names), n), np.float32)
-        for row, prop in zip(out, names, strict=True):
-            attr = _point_attribute(attributes, attribute_name_for(prop))
-            if attr.data_type == "FLOAT":
-                attr.data.foreach_get("value", row)
-            else:
-                raw = np.empty(n, np.int32)
-                attr.data.foreach_get("value", raw)
-                row[:] = raw
-        return out
-
-    sh_dc = np.ascontiguousarray(block([f"f_dc_{i}" for i in range(3)]).T)
-    sh_rest = np.ascontiguousarray(block([f"f_rest_{i}" for i in range(3 * k)]).reshape(3, k, n).transpose(2, 1, 0))
-    opacity = block(["opacity"]).reshape(n)
-    log_scales = np.ascontiguousarray(block([f"scale_{i}" for i in range(3)]).T)
-    quats = np.ascontiguousarray(block([f"rot_{i}" for i in range(4)]).T)
-    extras = {prop: _read_extra(attributes, prop, code, n) for prop, code in extras_props}
-
-    if bake_transform:
-        matrix = np.array(obj.matrix_world, np.float64)
-        if not transform.is_identity(matrix):
-            has_normals = all(p in extras and extras[p].dtype.kind == "f" for p in ("nx", "ny", "nz"))
-            arrays = transform.GaussianArrays(
-                means=means, quats=quats, log_scales=log_scales, sh_rest=sh_rest,
-                normals=np.stack([extras[p] for p in ("nx", "ny", "nz")], axis=1) if has_normals else None)
-            try:
-                baked = transform.bake(arrays, matrix)
-            except transform.TransformError as exc:
-                raise SplatObjectError(f"{obj.name!r}: {exc}") from None
-            means, quats, log_scales, sh_rest = baked.means, baked.quats, baked.log_scales, baked.sh_rest
-            if baked.normals is not None:
-                for i, p in enumerate(("nx", "ny", "nz")):
-                    extras[p] = np.ascontiguousarray(baked.normals[:, i], extras[p].dtype)
-            notes.extend(baked.notes)
-
+    layout, notes, extras_props = _export_properties(cloud, get_meta(cloud), k)
+    n = len(cloud.points)
     scene = SplatArrays(
-        means=np.ascontiguousarray(means),
-        quats=quats,
-        log_scales=log_scales,
-        opacity_logits=opacity,
-        sh_dc=sh_dc,
-        sh_rest=sh_rest,
-        extras=extras,
+        **_read_parameters(cloud, k),
+        extras={prop: _read_extra(cloud.attributes, prop, code, n) for prop, code in extras_props},
         ply_layout=tuple((p, t) for p, t in layout) if layout is not None else None,
     )
+    if bake_transform:
+        scene, baked_notes = _bake_world_matrix(obj, scene)
+        notes.extend(baked_notes)
     return scene, notes
 
 
-def _export_properties(cloud, meta: dict, k: int):
+def _read_parameters(cloud, k: int) -> dict[str, np.ndarray]:
+    """The Gaussian parameters of a splat point cloud by ``SplatArrays`` field (contiguous float32)."""
+    n = len(cloud.points)
+    means = np.empty(n * 3, np.float32)
+    if n:  # an empty point cloud has no position attribute
+        cloud.attributes[POSITION_ATTRIBUTE].data.foreach_get("vector", means)
+    fields = {"means": means.reshape(n, 3)}
+    for key, names in core_groups(k).items():
+        if key != "means":
+            fields[key] = np.ascontiguousarray(tensor_view(key, _read_rows(cloud.attributes, names, n).T))
+    return fields
+
+
+def _read_rows(attributes, names: list[str], n: int) -> np.ndarray:
+    """(len(names), n) float32: one row per PLY property, read from its point attribute (FLOAT or INT)."""
+    out = np.empty((len(names), n), np.float32)
+    for row, prop in zip(out, names, strict=True):
+        attr = _point_attribute(attributes, attribute_name_for(prop))
+        if attr.data_type == "FLOAT":
+            attr.data.foreach_get("value", row)
+        else:
+            raw = np.empty(n, np.int32)
+            attr.data.foreach_get("value", raw)
+            row[:] = raw
+    return out
+
+
+def _bake_world_matrix(obj, scene: SplatArrays) -> tuple[SplatArrays, list[str]]:
+    """``scene`` with the object's world matrix baked in (as it is for the identity), and notes for the user."""
+    matrix = np.array(obj.matrix_world, np.float64)
+    if transform.is_identity(matrix):
+        return scene, []
+    try:
+        return transform.bake(scene, matrix)
+    except transform.TransformError as exc:
+        raise SplatObjectError(f"{obj.name!r}: {exc}") from None
+
+
+def _export_properties(cloud, meta: dict, k: int) -> tuple[list | None, list[str], list[tuple[str, str]]]:
     """(layout or None, notes, [(extra property, numpy type code)]) for what an export would write."""
     attributes = cloud.attributes
     core = set(core_property_names(k))
@@ -397,13 +366,13 @@ def _export_properties(cloud, meta: dict, k: int):
     if layout is not None:
         for prop, ply_type in layout:
             listed.add(prop)
-            if prop in core or prop.startswith("f_rest_"):
+            if prop in core or prop.startswith(REST_PREFIX):
                 continue
             attr = _point_attribute(attributes, attribute_name_for(prop))
             if attr is None or attr.data_type not in ("FLOAT", "INT"):
                 notes.append(f"property {prop!r} of the source file has no attribute any more; not written")
                 continue
-            code = _PLY_TYPE_CODE.get(ply_type, "f4")
+            code = SCALAR_TYPES.get(ply_type, "f4")
             if (code in _FLOAT_CODES) != (attr.data_type == "FLOAT"):
                 code = "f4" if attr.data_type == "FLOAT" else "i4"
             extras.append((prop, code))
@@ -413,13 +382,14 @@ def _export_properties(cloud, meta: dict, k: int):
                 or name in RESERVED):
             continue
         prop = name[len(RENAME_PREFIX):] if name.startswith(RENAME_PREFIX) else name
-        if prop in listed or prop in core or prop.startswith("f_rest_"):
+        if prop in listed or prop in core or prop.startswith(REST_PREFIX):
             continue
         extras.append((prop, "f4" if attr.data_type == "FLOAT" else "i4"))
     return layout, notes, extras
 
 
 def _read_extra(attributes, prop: str, code: str, n: int) -> np.ndarray:
+    """An extra property's values from its attribute, as numpy type ``code`` (ints clipped to its range)."""
     attr = _point_attribute(attributes, attribute_name_for(prop))
     if attr.data_type == "FLOAT":
         values = np.empty(n, np.float32)
@@ -435,16 +405,12 @@ def _read_extra(attributes, prop: str, code: str, n: int) -> np.ndarray:
 
 def _rest_per_channel(attributes) -> int | None:
     """K (f_rest per channel) from the f_rest_* attributes; None if they are not a full SH set."""
-    names = {a.name for a in attributes if a.name.startswith("f_rest_") and a.domain == "POINT"
-             and a.data_type == "FLOAT"}
-    for degree in range(4):
-        count = 3 * ((degree + 1) ** 2 - 1)
-        if names == {f"f_rest_{i}" for i in range(count)}:
-            return count // 3
-    return None
+    return inria.rest_per_channel(a.name for a in attributes if a.name.startswith(REST_PREFIX)
+                                  and a.domain == "POINT" and a.data_type == "FLOAT")
 
 
 def _point_attribute(attributes, name: str):
+    """The POINT-domain attribute ``name``, or None."""
     attr = attributes.get(name)
     if attr is None or attr.domain != "POINT":
         return None
@@ -455,6 +421,7 @@ def _point_attribute(attributes, name: str):
 
 
 def set_meta(cloud, *, layout, fmt: str | None, source: str | None) -> None:
+    """Store the source layout, format and path as JSON on the point cloud (read back by ``get_meta``)."""
     cloud[META_KEY] = json.dumps({"version": 1, "layout": layout, "format": fmt, "source": source})
 
 
@@ -477,17 +444,6 @@ def get_meta(cloud) -> dict:
 
 
 # -- helpers --------------------------------------------------------------------------------------------
-
-
-def _np(tensor) -> np.ndarray:
-    """A tensor (torch or numpy) as a numpy array, without copying when possible."""
-    if hasattr(tensor, "detach"):
-        return tensor.detach().cpu().numpy()
-    return np.asarray(tensor)
-
-
-def _code(dtype: np.dtype) -> str:
-    return f"{dtype.kind}{dtype.itemsize}"
 
 
 def _remove_ids(ids: list) -> None:

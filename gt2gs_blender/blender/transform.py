@@ -19,9 +19,16 @@ Normals (``nx, ny, nz``) turn with Q for a similarity and with A⁻ᵀ (keeping 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+from ..core.rotations import quats_to_matrices
+from ..core.scene.inria import NORMAL_NAMES, SH_C0, sh_degree_from_rest
+
+if TYPE_CHECKING:
+    from ..core.scene.ply import SplatArrays
 
 _SH_C1 = 0.4886025119029199
 _SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
@@ -31,21 +38,8 @@ _SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763
 SIMILARITY_TOLERANCE = 1e-6
 """Relative deviation of AᵀA from s²·I below which A counts as a similarity."""
 
-
-@dataclass
-class GaussianArrays:
-    """Raw Gaussian parameters as numpy arrays, shaped like ``GaussianScene``'s tensors.
-
-    means (N,3), quats (N,4) w-first, log_scales (N,3), sh_rest (N,K,3); ``normals`` (N,3) or None.
-    """
-
-    means: np.ndarray
-    quats: np.ndarray
-    log_scales: np.ndarray
-    sh_rest: np.ndarray
-    normals: np.ndarray | None = None
-    notes: list[str] = field(default_factory=list)
-    """What the baking had to approximate or change, for the user (empty for a similarity)."""
+GENERAL_NOTE = ("the transform has a non-uniform scale, shear or mirror: covariances were baked "
+                "exactly, view-dependent colour (SH) was turned by the transform's rotation part")
 
 
 class TransformError(ValueError):
@@ -53,6 +47,7 @@ class TransformError(ValueError):
 
 
 def is_identity(matrix: np.ndarray, tol: float = 1e-12) -> bool:
+    """Whether ``matrix`` is the 4x4 identity within ``tol`` (then nothing needs baking)."""
     return bool(np.allclose(np.asarray(matrix, np.float64), np.eye(4), rtol=0.0, atol=tol))
 
 
@@ -69,8 +64,33 @@ def similarity_parts(linear: np.ndarray) -> tuple[float, np.ndarray] | None:
     return s, _nearest_rotation(a / s)
 
 
-def bake(arrays: GaussianArrays, matrix: np.ndarray) -> GaussianArrays:
-    """Return new arrays with the 4x4 ``matrix`` (applied to column vectors) baked in."""
+def bake(scene: SplatArrays, matrix: np.ndarray) -> tuple[SplatArrays, list[str]]:
+    """A copy of ``scene`` with the 4x4 ``matrix`` (applied to column vectors) baked in, and what the
+    baking had to approximate, for the user (nothing for a similarity). ``scene`` is not modified."""
+    linear, offset = _affine_parts(matrix)
+    parts = similarity_parts(linear)
+    if parts is not None:
+        s, rot = parts
+        quats = _quat_multiply(_quat_from_matrix(rot)[None, :], scene.quats.astype(np.float64))
+        log_scales = scene.log_scales.astype(np.float64) + np.log(s)
+        orth, normal_rotation, notes = rot, rot, []
+    else:
+        quats, log_scales = _bake_general(scene.quats, scene.log_scales, linear)
+        u, _, vt = np.linalg.svd(linear)
+        orth, normal_rotation, notes = u @ vt, None, [GENERAL_NOTE]
+    baked = replace(
+        scene,
+        means=(scene.means.astype(np.float64) @ linear.T + offset).astype(np.float32),
+        quats=quats.astype(np.float32),
+        log_scales=log_scales.astype(np.float32),
+        sh_rest=rotate_sh_rest(scene.sh_rest, orth),
+        extras=_turned_normals(scene.extras, linear, normal_rotation),
+    )
+    return baked, notes
+
+
+def _affine_parts(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(A, t) of a finite, non-singular 4x4 affine ``matrix``; ``TransformError`` otherwise."""
     m = np.asarray(matrix, np.float64)
     if m.shape != (4, 4) or not np.isfinite(m).all():
         raise TransformError("the object transform is not a finite 4x4 matrix")
@@ -80,42 +100,28 @@ def bake(arrays: GaussianArrays, matrix: np.ndarray) -> GaussianArrays:
     det = np.linalg.det(linear)
     if not abs(det) > 1e-12 * max(np.abs(linear).max(), 1e-300) ** 3:
         raise TransformError("the object transform is singular (a zero scale) and cannot be baked into splats")
+    return linear, offset
 
-    means = (arrays.means.astype(np.float64) @ linear.T + offset).astype(np.float32)
-    parts = similarity_parts(linear)
-    notes: list[str] = []
-    if parts is not None:
-        s, rot = parts
-        quats = _quat_multiply(_quat_from_matrix(rot)[None, :], arrays.quats.astype(np.float64))
-        log_scales = arrays.log_scales.astype(np.float64) + np.log(s)
-        q_orth = rot
-        normals = None if arrays.normals is None else (arrays.normals.astype(np.float64) @ rot.T)
+
+def _turned_normals(extras: dict[str, np.ndarray], linear: np.ndarray,
+                    rotation: np.ndarray | None) -> dict[str, np.ndarray]:
+    """``extras`` with float normals (nx, ny, nz) turned by ``rotation``, or by A⁻ᵀ keeping their length."""
+    if not all(p in extras and extras[p].dtype.kind == "f" for p in NORMAL_NAMES):
+        return extras
+    n = np.stack([extras[p] for p in NORMAL_NAMES], axis=1).astype(np.float64)
+    if rotation is not None:
+        turned = n @ rotation.T
     else:
-        quats, log_scales = _bake_general(arrays.quats, arrays.log_scales, linear)
-        u, _, vt = np.linalg.svd(linear)
-        q_orth = u @ vt
-        notes.append("the transform has a non-uniform scale, shear or mirror: covariances were baked "
-                     "exactly, view-dependent colour (SH) was turned by the transform's rotation part")
-        normals = None
-        if arrays.normals is not None:
-            n = arrays.normals.astype(np.float64)
-            turned = n @ np.linalg.inv(linear)  # rows: (A^-T n)^T = n^T A^-1
-            length = np.linalg.norm(n, axis=1, keepdims=True)
-            new_length = np.linalg.norm(turned, axis=1, keepdims=True)
-            normals = np.where(new_length > 0, turned * (length / np.where(new_length > 0, new_length, 1)), 0.0)
-    sh_rest = rotate_sh_rest(arrays.sh_rest, q_orth)
-    return GaussianArrays(
-        means=means,
-        quats=quats.astype(np.float32),
-        log_scales=log_scales.astype(np.float32),
-        sh_rest=sh_rest,
-        normals=None if normals is None else normals.astype(arrays.normals.dtype),
-        notes=notes,
-    )
+        turned = n @ np.linalg.inv(linear)  # rows: (A^-T n)^T = n^T A^-1
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        new_length = np.linalg.norm(turned, axis=1, keepdims=True)
+        turned = np.where(new_length > 0, turned * (length / np.where(new_length > 0, new_length, 1)), 0.0)
+    return {**extras, **{p: np.ascontiguousarray(turned[:, i], extras[p].dtype) for i, p in enumerate(NORMAL_NAMES)}}
 
 
 def _bake_general(quats: np.ndarray, log_scales: np.ndarray, linear: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    rot = quats_to_matrices(quats.astype(np.float64))
+    """Rotations and log-scales of A·R·S by SVD (U with det +1, Σ), for a transform that is no similarity."""
+    rot = quats_to_matrices(quats)
     scaled = (linear[None] @ rot) * np.exp(log_scales.astype(np.float64))[:, None, :]
     u, sigma, _ = np.linalg.svd(scaled)
     flip = np.linalg.det(u) < 0
@@ -125,19 +131,6 @@ def _bake_general(quats: np.ndarray, log_scales: np.ndarray, linear: np.ndarray)
 
 
 # -- quaternions (w, x, y, z) ---------------------------------------------------------------------------
-
-
-def quats_to_matrices(quats: np.ndarray) -> np.ndarray:
-    """(N,4) quaternions, any norm (zero -> identity), to (N,3,3) rotation matrices."""
-    q = np.asarray(quats, np.float64)
-    norm = np.linalg.norm(q, axis=1, keepdims=True)
-    q = np.where(norm > 1e-12, q / np.where(norm > 1e-12, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
-    w, x, y, z = q.T
-    return np.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], axis=1).reshape(-1, 3, 3)
 
 
 def quats_from_matrices(mats: np.ndarray) -> np.ndarray:
@@ -173,6 +166,7 @@ def quats_from_matrices(mats: np.ndarray) -> np.ndarray:
 
 
 def _quat_from_matrix(rot: np.ndarray) -> np.ndarray:
+    """The unit quaternion (w ≥ 0) of one 3x3 rotation matrix."""
     return quats_from_matrices(rot[None])[0]
 
 
@@ -189,6 +183,7 @@ def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def _nearest_rotation(a: np.ndarray) -> np.ndarray:
+    """The proper rotation closest to ``a`` (its polar factor, det forced to +1)."""
     u, _, vt = np.linalg.svd(a)
     r = u @ vt
     if np.linalg.det(r) < 0:
@@ -203,7 +198,7 @@ def _nearest_rotation(a: np.ndarray) -> np.ndarray:
 def sh_basis(dirs: np.ndarray, degree: int) -> np.ndarray:
     """Real SH basis (M, (degree+1)^2) at unit directions (M,3), the 3DGS convention (as core's sh_basis)."""
     x, y, z = np.asarray(dirs, np.float64).T
-    out = [np.full_like(x, 0.28209479177387814)]
+    out = [np.full_like(x, SH_C0)]
     if degree >= 1:
         out += [-_SH_C1 * y, _SH_C1 * z, -_SH_C1 * x]
     if degree >= 2:
@@ -244,7 +239,7 @@ def rotate_sh_rest(sh_rest: np.ndarray, orth: np.ndarray) -> np.ndarray:
     k = sh_rest.shape[1]
     if k == 0:
         return sh_rest.copy()
-    degree = int(round(np.sqrt(k + 1))) - 1
+    degree = sh_degree_from_rest(k)
     out = np.empty_like(sh_rest)
     for band, d in enumerate(sh_band_matrices(orth, degree), start=1):
         idx = slice(band * band - 1, (band + 1) ** 2 - 1)
