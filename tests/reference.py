@@ -1,9 +1,10 @@
 """A float64 dense per-pixel Gaussian renderer written plainly: the oracle for every backend.
 
 No tiles, no culling boxes, no chunking: every Gaussian in front of the near plane is evaluated at
-every pixel centre in depth order with the engine's alpha rules. It also marks pixels where a rule
-decision is within rounding distance of its threshold, where float32 backends may legitimately
-decide the other way.
+every pixel centre in depth order with the engine's alpha rules. The EWA Jacobian's frustum clamp is
+the published one (``frustum_clamp``), written from the 3DGS / gsplat rule rather than copied from the
+engine, so an engine that drifts from it fails here. It also marks pixels where a rule decision is
+within rounding distance of its threshold, where float32 backends may legitimately decide the other way.
 """
 from __future__ import annotations
 
@@ -56,6 +57,20 @@ def sh_color(coeffs: np.ndarray, d: np.ndarray, degree: int) -> np.ndarray:
     return np.maximum(rgb, 0.0)
 
 
+def frustum_clamp(x_over_z: float, y_over_z: float, k: np.ndarray, width: int, height: int) -> np.ndarray:
+    """x/z, y/z clamped where the EWA Jacobian is evaluated: the published 3DGS rule, not the engine's.
+
+    INRIA 3DGS clamps to +-1.3 tan(fov/2) with tan(fov_x/2) = W / (2 fx); gsplat's ``persp_proj``
+    (the rule followed here) shifts that box by the principal point: x/z in
+    [-(cx / fx + 0.3 tan_fov_x), (W - cx) / fx + 0.3 tan_fov_x], the same when cx = W / 2.
+    """
+    fx, fy, cx, cy = k[0, 0], k[1, 1], k[0, 2], k[1, 2]
+    tan_fov_x, tan_fov_y = 0.5 * width / fx, 0.5 * height / fy
+    x = min(max(x_over_z, -(cx / fx + 0.3 * tan_fov_x)), (width - cx) / fx + 0.3 * tan_fov_x)
+    y = min(max(y_over_z, -(cy / fy + 0.3 * tan_fov_y)), (height - cy) / fy + 0.3 * tan_fov_y)
+    return np.array([x, y])
+
+
 def render_reference(means, quats, scales, opacities, colors, viewmat, k, width, height, sh_degree=None):
     """Render one camera. Inputs are numpy arrays (cast to float64); colors (N,D) or SH (N,K,3)."""
     means, quats, scales, opacities, colors, viewmat, k = (
@@ -72,12 +87,7 @@ def render_reference(means, quats, scales, opacities, colors, viewmat, k, width,
             continue
         r = quat_to_matrix(quats[i]) @ np.diag(scales[i])
         cov_cam = rot @ (r @ r.T) @ rot.T
-        lim_x_pos = (width - cx) / fx + 0.3 * width / fx
-        lim_x_neg = cx / fx + 0.3 * width / fx
-        lim_y_pos = (height - cy) / fy + 0.3 * height / fy
-        lim_y_neg = cy / fy + 0.3 * height / fy
-        tx = p[2] * min(max(p[0] / p[2], -lim_x_neg), lim_x_pos)
-        ty = p[2] * min(max(p[1] / p[2], -lim_y_neg), lim_y_pos)
+        tx, ty = p[2] * frustum_clamp(p[0] / p[2], p[1] / p[2], k, width, height)
         jac = np.array([[fx / p[2], 0, -fx * tx / p[2] ** 2], [0, fy / p[2], -fy * ty / p[2] ** 2]])
         cov2 = jac @ cov_cam @ jac.T + 0.3 * np.eye(2)
         conic = np.linalg.inv(cov2)

@@ -17,7 +17,7 @@ from gt2gs_blender.core.render import available_backends, rasterization, render
 from gt2gs_blender.core.render import gsplat_backend
 from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
 
-from .reference import render_reference, support_radius
+from .reference import frustum_clamp, render_reference, support_radius
 
 BACKENDS = available_backends("cpu")
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,6 +108,21 @@ def test_matches_reference_extreme_gaussians(backend):
         means[24 + i] = cam_center + z * fwd
         scales[24 + i] = 0.01
     compare_to_reference((means, quats, scales, opacities, colors), viewmats, ks, 40, 32, backend, None)
+
+
+def test_reference_frustum_clamp_is_the_published_rule():
+    """The oracle's clamp: +-1.3 tan(fov/2) for a centred principal point (INRIA 3DGS), shifted with an
+    off-centre one as gsplat's persp_proj does; points inside pass unchanged."""
+    width, height, fx, fy = 64, 48, 40.0, 50.0
+    tan_x, tan_y = 0.5 * width / fx, 0.5 * height / fy
+    centred = np.array([[fx, 0, width / 2], [0, fy, height / 2], [0, 0, 1]])
+    assert np.allclose(frustum_clamp(10.0, -10.0, centred, width, height), [1.3 * tan_x, -1.3 * tan_y])
+    assert np.allclose(frustum_clamp(0.2, -0.3, centred, width, height), [0.2, -0.3])
+    shifted = np.array([[fx, 0, 16.0], [0, fy, 12.0], [0, 0, 1]])
+    assert np.allclose(frustum_clamp(10.0, 10.0, shifted, width, height),
+                       [(width - 16.0) / fx + 0.3 * tan_x, (height - 12.0) / fy + 0.3 * tan_y])
+    assert np.allclose(frustum_clamp(-10.0, -10.0, shifted, width, height),
+                       [-(16.0 / fx + 0.3 * tan_x), -(12.0 / fy + 0.3 * tan_y)])
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
