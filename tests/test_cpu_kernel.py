@@ -5,6 +5,7 @@ Without the kernel every rasterizer test still passes on the portable torch back
 fails instead. On a machine knowingly without a C++ toolchain, set GT2GS_ALLOW_NO_CPU_KERNEL=1 to
 skip it; CI does not set it.
 """
+
 from __future__ import annotations
 
 import os
@@ -26,7 +27,8 @@ def test_cpu_kernel_is_built_and_loaded():
         pytest.skip(f"{ALLOW_NO_KERNEL}=1 and the kernel is unavailable: {cpu_backend.unavailable_reason()}")
     assert available_backends("cpu") == ["cpu", "torch"], (
         f"the compiled cpu rasterizer did not build or load: {cpu_backend.unavailable_reason()} "
-        f"(set {ALLOW_NO_KERNEL}=1 to run without it on purpose)")
+        f"(set {ALLOW_NO_KERNEL}=1 to run without it on purpose)"
+    )
     assert resolve_backend("auto", "cpu") == "cpu"
 
 
@@ -35,8 +37,10 @@ def kernel() -> ModuleType:
     """The kernel as the backend loaded it (from the user's cache: built there at most once)."""
     module = cpu_backend.load_kernel()
     if module is None:
-        pytest.skip(f"no compiled kernel here (test_cpu_kernel_is_built_and_loaded says why): "
-                    f"{cpu_backend.unavailable_reason()}")
+        pytest.skip(
+            f"no compiled kernel here (test_cpu_kernel_is_built_and_loaded says why): "
+            f"{cpu_backend.unavailable_reason()}"
+        )
     return module
 
 

@@ -6,6 +6,7 @@ and compiled from there, so the same sources in the installed extension and in a
 one build (torch's own cache is keyed by the source path and would compile each copy). A finished
 build leaves a marker; later loads import the library directly, without ninja or the compiler.
 """
+
 from __future__ import annotations
 
 import functools
@@ -129,8 +130,12 @@ def build(sources: list[Path], directory: Path) -> ModuleType:
 
     log.info("compiling the CPU rasterizer kernel in %s (once per kernel version)", directory)
     module = cpp_extension.load(
-        name=NAME, sources=[str(p) for p in sources], build_directory=str(directory), extra_cflags=cflags(),
-        extra_ldflags=list(LDFLAGS), verbose=False,  # a copy: torch appends its own flags to the list
+        name=NAME,
+        sources=[str(p) for p in sources],
+        build_directory=str(directory),
+        extra_cflags=cflags(),
+        extra_ldflags=list(LDFLAGS),
+        verbose=False,  # a copy: torch appends its own flags to the list
     )
     inputs = "".join(f"{name}: {value}\n" for name, value in build_inputs().items())
     write_atomically(directory / DONE, inputs.encode())
