@@ -18,7 +18,8 @@ ALPHA_MIN = 1.0 / 255.0
 EPS2D = 0.3
 """Screen-space dilation (px^2) added to every 2D covariance, as in 3DGS (anti-aliasing floor)."""
 FOV_CLAMP = 1.3
-"""Jacobian evaluated at most 30 % outside the view frustum, as in 3DGS, to bound huge footprints."""
+"""The EWA Jacobian is evaluated at most 30 % of tan(fov/2) outside the view frustum (3DGS, gsplat), which
+bounds the footprints of Gaussians far off-screen."""
 
 
 @dataclass
@@ -67,10 +68,10 @@ def _jacobians(p: torch.Tensor, k: torch.Tensor, width: int, height: int) -> tor
     """Perspective Jacobians d(u,v)/d(x,y,z), (M, 2, 3), with 3DGS's frustum clamp."""
     fx, fy, cx, cy = k[:, 0, 0], k[:, 1, 1], k[:, 0, 2], k[:, 1, 2]
     x, y, z = p.unbind(-1)
-    lim_x_pos = (width - cx) / fx + (FOV_CLAMP - 1.0) * width / fx
-    lim_x_neg = cx / fx + (FOV_CLAMP - 1.0) * width / fx
-    lim_y_pos = (height - cy) / fy + (FOV_CLAMP - 1.0) * height / fy
-    lim_y_neg = cy / fy + (FOV_CLAMP - 1.0) * height / fy
+    lim_x_pos = (width - cx) / fx + (FOV_CLAMP - 1.0) * 0.5 * width / fx
+    lim_x_neg = cx / fx + (FOV_CLAMP - 1.0) * 0.5 * width / fx
+    lim_y_pos = (height - cy) / fy + (FOV_CLAMP - 1.0) * 0.5 * height / fy
+    lim_y_neg = cy / fy + (FOV_CLAMP - 1.0) * 0.5 * height / fy
     tx = z * torch.minimum(torch.maximum(x / z, -lim_x_neg), lim_x_pos)
     ty = z * torch.minimum(torch.maximum(y / z, -lim_y_neg), lim_y_pos)
     zero = torch.zeros_like(z)

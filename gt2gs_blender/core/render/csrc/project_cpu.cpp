@@ -39,10 +39,10 @@ Cam camera(const T* viewmat, const T* k, int64_t width, int64_t height) {
   c.fy = k[4];
   c.cx = k[2];
   c.cy = k[5];
-  c.lim_xp = (width - c.cx) / c.fx + (kFovClamp - 1.0) * width / c.fx;
-  c.lim_xn = c.cx / c.fx + (kFovClamp - 1.0) * width / c.fx;
-  c.lim_yp = (height - c.cy) / c.fy + (kFovClamp - 1.0) * height / c.fy;
-  c.lim_yn = c.cy / c.fy + (kFovClamp - 1.0) * height / c.fy;
+  c.lim_xp = (width - c.cx) / c.fx + (kFovClamp - 1.0) * 0.5 * width / c.fx;
+  c.lim_xn = c.cx / c.fx + (kFovClamp - 1.0) * 0.5 * width / c.fx;
+  c.lim_yp = (height - c.cy) / c.fy + (kFovClamp - 1.0) * 0.5 * height / c.fy;
+  c.lim_yn = c.cy / c.fy + (kFovClamp - 1.0) * 0.5 * height / c.fy;
   return c;
 }
 
