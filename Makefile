@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench venv clean
+.PHONY: demo test lint bench venv clean
 
 venv: $(STAMP)
 
@@ -17,8 +17,15 @@ $(STAMP): requirements.txt
 demo: $(STAMP)
 	$(PY) -m gt2gs_blender demo
 
-test: $(STAMP)
-	$(PY) -m pytest -q
+# Tests use the real ImageNet weights from ../shared (one test covers the no-weights fallback itself).
+test: $(STAMP) lint
+	GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} $(PY) -m pytest -q
+
+# Style and architecture: ruff (lint + format) and the import contracts in pyproject.toml.
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+	$(VENV)/bin/lint-imports
 
 bench: $(STAMP)
 	$(PY) bench/raster.py --quick

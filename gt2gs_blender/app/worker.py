@@ -1,6 +1,6 @@
 """The worker process: one texture transfer (or orientation preview) described by a JSON job file.
 
-``python -m gt2gs_blender.app.worker JOB.json`` runs it outside Blender (DESIGN §7: torch never
+``python -m gt2gs_blender.app.worker JOB.json`` runs it outside Blender (docs/architecture.md, "The worker": torch never
 loads into Blender, a crash cannot take Blender down, Cancel can always stop it). The job file:
 
     {"kind": "transfer" | "preview", "input": "scene.ply", "texture": "texture.png" (or pixels.npy),

@@ -1,7 +1,7 @@
 """Blender cameras as 3DGS ``cameras.json`` entries in a splat object's own (PLY) space.
 
 Blender cameras look down -z with y up; ``core`` uses OpenCV axes, so the camera-to-world rotation
-is ``R_cv = R_blender @ diag(1, -1, -1)`` (DESIGN §3). The PLY lives in the object's local space, so
+is ``R_cv = R_blender @ diag(1, -1, -1)`` (docs/architecture.md, "Conventions"). The PLY lives in the object's local space, so
 each camera is expressed relative to the object: ``inverse(object.matrix_world) @ camera.matrix_world``,
 with the scale taken out of the rotation (exact for uniform object scale; a non-uniform scale
 makes the views approximate). Intrinsics follow Blender's sensor fit, lens shift and the scene's

@@ -5,6 +5,7 @@ import json
 import re
 from pathlib import Path
 from typing import Any
+from ...core.scene.inria import NORMAL_NAMES
 from ...core.scene.ply import read_ply
 from ...core.scene.ply_header import read_ply_header
 from ...core.scene.gaussians import GaussianScene
@@ -40,7 +41,7 @@ def scene_info(path: Path, *, drop_invalid: bool = False) -> dict[str, Any]:
         "format": header.format,
         "count": len(scene),
         "sh_degree": scene.sh_degree,
-        "normals": all(name in scene.extras for name in ("nx", "ny", "nz")),
+        "normals": all(name in scene.extras for name in NORMAL_NAMES),
         "bounds": _bounds(scene, 1.0),
         "robust_bounds": _bounds(scene, ROBUST_QUANTILE),
         "robust_quantile": ROBUST_QUANTILE,

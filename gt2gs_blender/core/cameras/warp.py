@@ -1,7 +1,7 @@
 """Reprojection between posed views through rendered depth: exact for a rendered scene, so the
 consistency metrics need no optical flow, and the GT^2 loss can carry matches from view to view.
 
-Conventions (DESIGN section 3): OpenCV camera frame, pixel centres at +0.5 (pixel (row i, col j) is
+Conventions (docs/architecture.md, "Conventions"): OpenCV camera frame, pixel centres at +0.5 (pixel (row i, col j) is
 at u = j + 0.5, v = i + 0.5 and u = fx*x/z + cx). Depths here are *expected* depths (the
 rasterizer's sum T*alpha*z divided by alpha, see :func:`expected_depth`); 0 marks "no surface".
 Geometry is computed in float64.

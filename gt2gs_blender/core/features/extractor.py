@@ -5,7 +5,7 @@ relu3_2 and relu3_3 (768 channels), on renders downscaled x0.5 before the networ
 weights do not exist (no internet, no cached copy) the normalised VGG-19 to relu3_1 is the closest
 real substitute (relu2_1 + relu3_1 by default). Both are plain ``nn.Sequential`` stacks with
 torchvision's layer indices (``features.N.weight``), so torchvision state dicts load unchanged;
-torchvision itself cannot be imported beside the torch CPU wheel used here (DESIGN section 6).
+torchvision itself cannot be imported beside the torch CPU wheel used here (docs/architecture.md, "Feature network and weights").
 Which weights are found, and the reported no-weights fallback, is :mod:`.weights`' business.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The stylisation loss pieces: cosine distance and nearest texture features (NNFM, paper Eq. 3), content, image TV, scale regulariser.
 
-Conventions that differ from the authors' code on purpose (DESIGN §5): cosine similarity is taken
+Conventions that differ from the authors' code on purpose (docs/architecture.md, "The method and the authors' code"): cosine similarity is taken
 over the CHANNEL axis of feature maps (theirs normalises over height), and TV differences pixels
 along HEIGHT and WIDTH (theirs differences channels and height).
 """

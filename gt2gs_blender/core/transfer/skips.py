@@ -1,4 +1,4 @@
-"""Work a run can skip without changing what it computes much (DESIGN section 8), each switchable in
+"""Work a run can skip without changing what it computes much (docs/speed.md, "Skips"), each switchable in
 :class:`~.config.TransferConfig` and measured by ``bench/tradeoff.py --skips``:
 
 - SH bands whose coefficients are all zero are never evaluated (:func:`used_sh_degree`);
