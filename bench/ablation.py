@@ -2,27 +2,29 @@
 
 ``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D] [--seeds S]
 [--elevation DEG] [--set KEY=VALUE ...] [--json PATH]`` prints a table of SSIM, short/long-range RMSE and
-LPIPS, texture match, coarse long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed, then each variant's mean and
-half-range), writes the records to bench/out/ablation.json (or PATH) and a PNG strip per scene beside them
-(texture, original, then each variant, 3 views; first seed). ``--set`` changes a TransferConfig field for every
-variant: ``--set stylise_geometry=true`` runs the authors' coupled optimisation, where the GPB has geometry to correct.
-``lt_rmse_coarse`` is the long-range RMSE of renders blurred by 2 px first: on the donut's views 157 degrees apart the
-depth warp misregisters fine detail, so the plain RMSE grows with how much detail a result carries.
-"No GT²" is the paper's NNFM loss (Eq. 1): nearest cells of the texture's own feature map. Texture match is
-measured against the labelled bank (every orientation and scale) for every variant.
-Every variant runs every step of the preset's schedule (no loss-plateau stop), so the budgets are
-equal: a variant without the GPB stylises in one phase, whose plateau comes at another step count.
-The donut uses 16 automatic orbit views (``--elevation DEG`` sets the orbit's elevation, default 20: at 60 the
-views 157 degrees apart share the donut's top, 20 % of the image instead of 3 %, so long-range consistency
-weighs real surface); the fern is the shared LLFF capture fitted with the fit engine (``bench/fit_fern.py``
-output, fitted here first when missing) seen from its own cameras.
-``--video K`` also measures consistency the peers' way (StyleGaussian, cited by the paper): on a rendered video, a
-smooth path with K frames between consecutive views (closed around the donut's orbit), frames i vs i+1 (video_st)
-and i vs i+7 (video_lt), which on the donut's 16 views at K = 8 are 2.8 and 20 degrees apart instead of 22.5 and 157.
-``--sh-degree D`` > 0 runs every variant with view-dependent restyled colours (stylised_sh_degree):
-the setting of the NNFM baselines, where per-view disagreements can show up as view-dependent colour,
-so that long-range consistency can tell the variants apart (at 0 both are consistent by construction).
+LPIPS, texture match, coarse long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed,
+then each variant's mean and half-range), writes the records to bench/out/ablation.json (or PATH) and a PNG
+strip per scene beside them (texture, original, then each variant, 3 views; first seed). ``--set`` changes a
+TransferConfig field for every variant: ``--set stylise_geometry=true`` runs the authors' coupled
+optimisation, where the GPB has geometry to correct. ``lt_rmse_coarse`` is the long-range RMSE of renders
+blurred by 2 px first: on the donut's views 157 degrees apart the depth warp misregisters fine detail, so
+the plain RMSE grows with how much detail a result carries. "No GT²" is the paper's NNFM loss (Eq. 1):
+nearest cells of the texture's own feature map. Texture match is measured against the labelled bank (every
+orientation and scale) for every variant. Every variant runs every step of the preset's schedule (no
+loss-plateau stop), so the budgets are equal: a variant without the GPB stylises in one phase, whose plateau
+comes at another step count. The donut uses 16 automatic orbit views (``--elevation DEG`` sets the orbit's
+elevation, default 20: at 60 the views 157 degrees apart share the donut's top, 20 % of the image instead of
+3 %, so long-range consistency weighs real surface); the fern is the shared LLFF capture fitted with the fit
+engine (``bench/fit_fern.py`` output, fitted here first when missing) seen from its own cameras. ``--video
+K`` also measures consistency the peers' way (StyleGaussian, cited by the paper): on a rendered video, a
+smooth path with K frames between consecutive views (closed around the donut's orbit), frames i vs i+1
+(video_st) and i vs i+7 (video_lt), which on the donut's 16 views at K = 8 are 2.8 and 20 degrees apart
+instead of 22.5 and 157. ``--sh-degree D`` > 0 runs every variant with view-dependent restyled colours
+(stylised_sh_degree): the setting of the NNFM baselines, where per-view disagreements can show up as
+view-dependent colour, so that long-range consistency can tell the variants apart (at 0 both are consistent
+by construction).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,19 +42,19 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.cameras.generate import auto_views, camera_path
-from gt2gs_blender.core.cameras.files import load_views  # noqa: E402
-from gt2gs_blender.core.transfer.config import preset  # noqa: E402
-from gt2gs_blender.core.transfer.gt2 import view_order  # noqa: E402
-from gt2gs_blender.core.features.lpips import LPIPS, load_lpips  # noqa: E402
-from gt2gs_blender.core.transfer.metrics import LONG_RANGE, SHORT_RANGE, consistency  # noqa: E402
-from gt2gs_blender.core.fit.trainer import FitConfig, fit_llff  # noqa: E402
-from gt2gs_blender.core.scene.ply import read_ply  # noqa: E402
-from gt2gs_blender.core.render import render  # noqa: E402
-from gt2gs_blender.core.scene.gaussians import GaussianScene  # noqa: E402
-from gt2gs_blender.core.transfer.texture import load_texture  # noqa: E402
+from gt2gs_blender.core.features.lpips import LPIPS, load_lpips
+from gt2gs_blender.core.fit.trainer import FitConfig, fit_llff
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.transfer.gt2 import view_order
+from gt2gs_blender.core.transfer.metrics import LONG_RANGE, SHORT_RANGE, consistency
+from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.presets import preset
+from gt2gs_blender.core.transfer.texture import load_texture
 from gt2gs_blender.core.transfer.views import fit_cameras
-from gt2gs_blender.core.transfer.pipeline import transfer  # noqa: E402
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
@@ -74,14 +76,16 @@ COARSE_SIGMA = 2.0
 VIDEO_METRICS = ("video_st_rmse", "video_st_lpips", "video_lt_rmse", "video_lt_lpips")
 
 
-def load_scene(name: str, fit_iterations: int,
-               elevation: float | None = None) -> tuple[GaussianScene, list[Camera] | None]:
+def load_scene(
+    name: str, fit_iterations: int, elevation: float | None = None
+) -> tuple[GaussianScene, list[Camera] | None]:
     """The scene and its views (None = the transfer's automatic views; the donut's orbit at ``elevation``
     degrees when given: 16 views at 256 px, as the fast preset's own)."""
     if name == "donut":
         donut = read_ply(SHARED / "data" / "scenes" / "donut" / "point_cloud.ply")
-        return donut, None if elevation is None else auto_views(donut, 16, width=256, height=256,
-                                                                 elevation_deg=elevation)
+        return donut, None if elevation is None else auto_views(
+            donut, 16, width=256, height=256, elevation_deg=elevation
+        )
     fitted = OUT / "fit_fern"
     if not (fitted / "point_cloud.ply").is_file():
         print(f"fitting the fern first ({fit_iterations} steps) into {fitted}", flush=True)
@@ -89,19 +93,37 @@ def load_scene(name: str, fit_iterations: int,
     return read_ply(fitted / "point_cloud.ply"), load_views(fitted / "cameras.json")
 
 
-def run_variant(scene: GaussianScene, texture: np.ndarray, views: list[Camera] | None, overrides: dict,
-                args: argparse.Namespace, background: tuple[float, float, float], seed: int,
-                video: tuple[list[Camera], LPIPS] | None) -> tuple[dict, GaussianScene]:
-    config = preset(args.preset, stylise_steps=args.steps, weights_path=str(SHARED / "weights"), seed=seed,
-                    background=background, stylised_sh_degree=args.sh_degree, plateau_window=0,
-                    **{**args.overrides, **overrides})
+def run_variant(
+    scene: GaussianScene,
+    texture: np.ndarray,
+    views: list[Camera] | None,
+    overrides: dict,
+    args: argparse.Namespace,
+    background: tuple[float, float, float],
+    seed: int,
+    video: tuple[list[Camera], LPIPS] | None,
+) -> tuple[dict, GaussianScene]:
+    config = preset(
+        args.preset,
+        stylise_steps=args.steps,
+        weights_path=str(SHARED / "weights"),
+        seed=seed,
+        background=background,
+        stylised_sh_degree=args.sh_degree,
+        plateau_window=0,
+        **{**args.overrides, **overrides},
+    )
     start = time.perf_counter()
     result = transfer(scene, texture, views, config)
     row = {k: result.report["metrics"][k] for k in METRICS if k in result.report["metrics"]}
-    row["lt_rmse_coarse"] = coarse_consistency(result.scene, fit_cameras(scene, views, config.resolution,
-                                                                         config.n_views), background)
-    row.update(texture_match_start=result.report["metrics"]["texture_match_start"],
-               seconds=time.perf_counter() - start, n_gaussians=result.report["n_gaussians"])
+    row["lt_rmse_coarse"] = coarse_consistency(
+        result.scene, fit_cameras(scene, views, config.resolution, config.n_views), background
+    )
+    row.update(
+        texture_match_start=result.report["metrics"]["texture_match_start"],
+        seconds=time.perf_counter() - start,
+        n_gaussians=result.report["n_gaussians"],
+    )
     if video is not None:
         row.update(video_consistency(result.scene, *video, background))
     return row, result.scene
@@ -111,8 +133,9 @@ def coarse_consistency(scene: GaussianScene, cameras: list[Camera], background: 
     """Long-range RMSE of the renders blurred by COARSE_SIGMA first: consistency of what the views show,
     without the misregistration of fine detail that a depth warp across distant views leaves behind."""
     out = render(scene, cameras, background=torch.tensor(background))
-    blurred = torch.stack([torch.from_numpy(cv2.GaussianBlur(image.clamp(0, 1).numpy(), (0, 0), COARSE_SIGMA))
-                           for image in out.colors])
+    blurred = torch.stack(
+        [torch.from_numpy(cv2.GaussianBlur(image.clamp(0, 1).numpy(), (0, 0), COARSE_SIGMA)) for image in out.colors]
+    )
     return consistency(blurred, out.depths, out.alphas, cameras, LONG_RANGE)["rmse"]
 
 
@@ -123,8 +146,9 @@ def video_path(scene: GaussianScene, views: list[Camera] | None, frames_per_gap:
     return camera_path([cameras[i] for i in view_order(cameras)], frames_per_gap, closed=closed)
 
 
-def video_consistency(scene: GaussianScene, path: list[Camera], lpips: LPIPS,
-                      background: tuple[float, float, float]) -> dict:
+def video_consistency(
+    scene: GaussianScene, path: list[Camera], lpips: LPIPS, background: tuple[float, float, float]
+) -> dict:
     """``video_{st,lt}_{rmse,lpips}``: consistency of ``scene`` rendered along ``path``."""
     out = render(scene, path, background=torch.tensor(background))
     row = {}
@@ -134,25 +158,34 @@ def video_consistency(scene: GaussianScene, path: list[Camera], lpips: LPIPS,
     return row
 
 
-def strip(texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[Camera],
-          background: tuple[float, float, float]) -> np.ndarray:
+def strip(
+    texture: np.ndarray, scenes: dict[str, GaussianScene], cameras: list[Camera], background: tuple[float, float, float]
+) -> np.ndarray:
     """One row per scene (original, then the variants), one column per view, each row labelled on
     the left; the first label tile shows the texture. uint8 RGB."""
     rows = []
     for i, (name, scene) in enumerate(scenes.items()):
-        label = cv2.resize(texture, (TILE, TILE), interpolation=cv2.INTER_AREA) if i == 0 \
+        label = (
+            cv2.resize(texture, (TILE, TILE), interpolation=cv2.INTER_AREA)
+            if i == 0
             else np.ones((TILE, TILE, 3), np.float32)
+        )
         cv2.putText(label, name, (8, TILE - 12), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (0.0, 0.0, 0.0), 2, cv2.LINE_AA)
         tiles = [label] + [
-            cv2.resize(render(scene, [cam], background=torch.tensor(background)).colors[0].clamp(0, 1).numpy(),
-                       (TILE, TILE), interpolation=cv2.INTER_AREA) for cam in cameras]
+            cv2.resize(
+                render(scene, [cam], background=torch.tensor(background)).colors[0].clamp(0, 1).numpy(),
+                (TILE, TILE),
+                interpolation=cv2.INTER_AREA,
+            )
+            for cam in cameras
+        ]
         rows.append(np.concatenate(tiles, axis=1))
     return (np.concatenate(rows, axis=0) * 255 + 0.5).astype(np.uint8)
 
 
 def seed_summary(rows: list[dict], metrics: tuple[str, ...]) -> tuple[dict, dict]:
     """Mean and half-range over seeds of every metric, the time and the Gaussian count."""
-    keys = metrics + ("seconds", "n_gaussians")
+    keys = (*metrics, "seconds", "n_gaussians")
     values = {k: [r[k] for r in rows if r[k] is not None] for k in keys}
     mean = {k: float(np.mean(v)) if v else None for k, v in values.items()}
     spread = {k: (max(v) - min(v)) / 2.0 if v else None for k, v in values.items()}
@@ -172,14 +205,24 @@ def main() -> None:
     parser.add_argument("--steps", type=int, help="stylise steps (default: the preset's)")
     parser.add_argument("--fit-iterations", type=int, default=1500, help="fern fit steps when it must be fitted")
     parser.add_argument("--sh-degree", type=int, default=0, help="SH degree of the restyled colours (0-3)")
-    parser.add_argument("--video", type=int, default=0, metavar="K",
-                        help="also video consistency: K path frames per view gap (0 = off)")
-    parser.add_argument("--elevation", type=float, metavar="DEG",
-                        help="the donut's orbit elevation (default: the automatic views', 20): at 60 its views "
-                             "157 degrees apart share the top (20 %% of the image, not 3 %%)")
+    parser.add_argument(
+        "--video", type=int, default=0, metavar="K", help="also video consistency: K path frames per view gap (0 = off)"
+    )
+    parser.add_argument(
+        "--elevation",
+        type=float,
+        metavar="DEG",
+        help="the donut's orbit elevation (default: the automatic views', 20): at 60 its views "
+        "157 degrees apart share the top (20 %% of the image, not 3 %%)",
+    )
     parser.add_argument("--seeds", type=int, default=1, help="runs per variant, seeds 0..S-1 (densify and view draws)")
-    parser.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
-                        help="TransferConfig overrides for every variant (values in JSON: 1, 0.5, true)")
+    parser.add_argument(
+        "--set",
+        nargs="+",
+        default=[],
+        metavar="KEY=VALUE",
+        help="TransferConfig overrides for every variant (values in JSON: 1, 0.5, true)",
+    )
     parser.add_argument("--json", type=Path, help="records (default bench/out/ablation[_shD].json)")
     args = parser.parse_args()
     args.overrides = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
@@ -194,16 +237,25 @@ def main() -> None:
         scene, views = load_scene(scene_name, args.fit_iterations, args.elevation)
         texture = load_texture(SHARED / "data" / "textures" / texture_name)
         results = {"original": scene}
-        video = None if not args.video else (video_path(scene, views, args.video, closed=scene_name == "donut"),
-                                             load_lpips(SHARED / "weights"))
+        video = (
+            None
+            if not args.video
+            else (video_path(scene, views, args.video, closed=scene_name == "donut"), load_lpips(SHARED / "weights"))
+        )
         for variant in args.variants:
             rows = []
             for seed in range(args.seeds):
-                row, result = run_variant(scene, texture, views, VARIANTS[variant], args, background, seed,
-                                          video)
+                row, result = run_variant(scene, texture, views, VARIANTS[variant], args, background, seed, video)
                 results.setdefault(variant, result)
-                row.update(scene=scene_name, variant=variant, seed=seed, texture=texture_name, preset=args.preset,
-                           sh_degree=args.sh_degree, load=os.getloadavg())
+                row.update(
+                    scene=scene_name,
+                    variant=variant,
+                    seed=seed,
+                    texture=texture_name,
+                    preset=args.preset,
+                    sh_degree=args.sh_degree,
+                    load=os.getloadavg(),
+                )
                 rows.append(row)
                 print_row(scene_name, variant if args.seeds == 1 else f"{variant}/{seed}", row, metrics)
             records.extend(rows)

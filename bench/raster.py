@@ -9,6 +9,7 @@ pixels where no alpha rule sits on its threshold; it is measured where the refer
     python bench/raster.py --quick            # 10k@256, 50k@512, 200k@512, a few minutes
     python bench/raster.py --json out.json    # the full grid
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,7 +28,7 @@ FULL_N = [10_000, 50_000, 200_000, 1_000_000]
 FULL_RES = [256, 512, 1024]
 QUICK = [(10_000, 256), (50_000, 512), (200_000, 512)]
 REFERENCE_MAX_WORK = 10_000 * 256 * 256  # Gaussians x pixels the float64 reference can afford here
-SLOW_BACKEND_LIMIT_S = 30.0              # beyond this fwd+bwd, larger configs of a backend are skipped
+SLOW_BACKEND_LIMIT_S = 30.0  # beyond this fwd+bwd, larger configs of a backend are skipped
 
 
 def make_scene(n: int, res: int, seed: int = 0):
@@ -79,14 +80,20 @@ def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
     if n * res * res <= REFERENCE_MAX_WORK:
         from tests.reference import render_reference
 
-        ref = render_reference(*(p.detach().numpy() for p in params), viewmats[0].numpy(), ks[0].numpy(), res, res,
-                               sh_degree=3)
+        ref = render_reference(
+            *(p.detach().numpy() for p in params), viewmats[0].numpy(), ks[0].numpy(), res, res, sh_degree=3
+        )
         diff = (out.colors[0].detach().double().numpy() - ref.color)[~ref.ambiguous]
         err = float(abs(diff).max())
     return {
-        "backend": backend, "n": n, "width": res, "height": res,
-        "fwd_ms": 1000 * statistics.median(fwd), "fwd_bwd_ms": 1000 * statistics.median(total),
-        "peak_mib": max(0.0, peak), "max_abs_err": err,
+        "backend": backend,
+        "n": n,
+        "width": res,
+        "height": res,
+        "fwd_ms": 1000 * statistics.median(fwd),
+        "fwd_bwd_ms": 1000 * statistics.median(total),
+        "peak_mib": max(0.0, peak),
+        "max_abs_err": err,
     }
 
 
@@ -96,8 +103,16 @@ def measure(backend: str, n: int, res: int, repeats: int) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
         print(f"  {backend} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
-        return {"backend": backend, "n": n, "width": res, "height": res, "fwd_ms": None, "fwd_bwd_ms": None,
-                "peak_mib": None, "max_abs_err": None}
+        return {
+            "backend": backend,
+            "n": n,
+            "width": res,
+            "height": res,
+            "fwd_ms": None,
+            "fwd_bwd_ms": None,
+            "peak_mib": None,
+            "max_abs_err": None,
+        }
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
@@ -132,15 +147,26 @@ def main(argv: list[str] | None = None) -> int:
     for n, res in configs:
         for backend in backends:
             if too_slow.get(backend, float("inf")) <= n * res * res:
-                rec = {"backend": backend, "n": n, "width": res, "height": res, "fwd_ms": None, "fwd_bwd_ms": None,
-                       "peak_mib": None, "max_abs_err": None}
+                rec = {
+                    "backend": backend,
+                    "n": n,
+                    "width": res,
+                    "height": res,
+                    "fwd_ms": None,
+                    "fwd_bwd_ms": None,
+                    "peak_mib": None,
+                    "max_abs_err": None,
+                }
             else:
                 rec = measure(backend, n, res, args.repeats)
                 if rec["fwd_bwd_ms"] is None or rec["fwd_bwd_ms"] > 1000 * SLOW_BACKEND_LIMIT_S:
                     too_slow[backend] = min(too_slow.get(backend, float("inf")), n * res * res + 1)
             records.append(rec)
-            print(f"{backend:8} {n:>9,} {res:>4}² {fmt(rec['fwd_ms'], '9.1f')} {fmt(rec['fwd_bwd_ms'], '11.1f')} "
-                  f"{fmt(rec['peak_mib'], '9.0f')} {fmt(rec['max_abs_err'], '9.1e')}", flush=True)
+            print(
+                f"{backend:8} {n:>9,} {res:>4}² {fmt(rec['fwd_ms'], '9.1f')} {fmt(rec['fwd_bwd_ms'], '11.1f')} "
+                f"{fmt(rec['peak_mib'], '9.0f')} {fmt(rec['max_abs_err'], '9.1e')}",
+                flush=True,
+            )
     args.json.parent.mkdir(parents=True, exist_ok=True)
     args.json.write_text(json.dumps(records, indent=1))
     print(f"wrote {args.json}")

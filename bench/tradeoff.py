@@ -10,6 +10,7 @@ then and is written there, and it is plotted too. Quality error = how far textur
 SSIM fall short of the reference, in percent (negative = better than the reference). Prints a
 table, writes bench/out/tradeoff.json and bench/out/tradeoff.png (time vs error, Pareto front).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,9 +30,9 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
-from gt2gs_blender.core.transfer.config import PRESETS, preset
 from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.presets import PRESETS, preset
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
@@ -55,15 +56,22 @@ METRICS = ("texture_match", "ssim", "lt_rmse")
 
 def run(preset_name: str, overrides: dict[str, Any], cache_dir: str) -> dict[str, Any]:
     """One end-to-end transfer (the bank built into ``cache_dir``); its times and metrics."""
-    config = preset(preset_name, weights_path=str(SHARED / "weights"), cache_dir=cache_dir, evaluate=True,
-                    **overrides)
+    config = preset(preset_name, weights_path=str(SHARED / "weights"), cache_dir=cache_dir, evaluate=True, **overrides)
     scene = read_ply(SCENE)
     load = os.getloadavg()
     start = time.perf_counter()
     report = transfer(scene, str(TEXTURE), None, config).report
-    return {"preset": preset_name, "overrides": overrides, "seconds": time.perf_counter() - start,
-            "stage_seconds": report["stage_seconds"], "metrics": report["metrics"], "skips": report["skips"],
-            "n_gaussians": report["n_gaussians"], "load": load, "load_after": os.getloadavg()}
+    return {
+        "preset": preset_name,
+        "overrides": overrides,
+        "seconds": time.perf_counter() - start,
+        "stage_seconds": report["stage_seconds"],
+        "metrics": report["metrics"],
+        "skips": report["skips"],
+        "n_gaussians": report["n_gaussians"],
+        "load": load,
+        "load_after": os.getloadavg(),
+    }
 
 
 def shortfall(record: dict[str, Any], reference: dict[str, Any]) -> dict[str, float]:
@@ -91,8 +99,9 @@ def plot(records: list[dict[str, Any]], path: Path, reference: str) -> None:
     fig, ax = plt.subplots(figsize=(6.4, 3.6), dpi=100)
     points = [(r["seconds"], r["error_pct"]) for r in records]
     front = pareto(points)
-    ax.plot([points[i][0] for i in front], [points[i][1] for i in front], "-", color="0.7", zorder=1,
-            label="Pareto front")
+    ax.plot(
+        [points[i][0] for i in front], [points[i][1] for i in front], "-", color="0.7", zorder=1, label="Pareto front"
+    )
     for i, (r, (x, y)) in enumerate(zip(records, points)):
         ax.scatter([x], [y], s=28, zorder=2, color="C3" if r["name"] == "fast" else "C0")
         ax.annotate(r["name"], (x, y), textcoords="offset points", xytext=(-20, 8 + 12 * (i % 3)), fontsize=7)
@@ -112,10 +121,15 @@ def plot(records: list[dict[str, Any]], path: Path, reference: str) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(DEFAULT_VARIANTS))
-    parser.add_argument("--reference-preset", choices=tuple(PRESETS), default="balanced",
-                        help="the quality reference, run with every skip off (default: balanced)")
-    parser.add_argument("--reference", type=Path,
-                        help="its record (default bench/out/transfer_<preset>_ref.json; run when missing)")
+    parser.add_argument(
+        "--reference-preset",
+        choices=tuple(PRESETS),
+        default="balanced",
+        help="the quality reference, run with every skip off (default: balanced)",
+    )
+    parser.add_argument(
+        "--reference", type=Path, help="its record (default bench/out/transfer_<preset>_ref.json; run when missing)"
+    )
     parser.add_argument("--json", type=Path, default=OUT / "tradeoff.json")
     parser.add_argument("--png", type=Path, default=OUT / "tradeoff.png")
     args = parser.parse_args()
@@ -133,15 +147,20 @@ def main() -> None:
             reference = run(args.reference_preset, NO_SKIPS, cache)
             args.reference.write_text(json.dumps(reference, indent=1))
     records.append({"name": f"{args.reference_preset}, no skips (reference)", **reference})
-    print(f"{'variant':<32} {'s':>7} {'load':>5} " + " ".join(f"{m:>13}" for m in METRICS)
-          + f" {'tm short %':>10} {'ssim short %':>12} {'hidden':>7}")
+    print(
+        f"{'variant':<32} {'s':>7} {'load':>5} "
+        + " ".join(f"{m:>13}" for m in METRICS)
+        + f" {'tm short %':>10} {'ssim short %':>12} {'hidden':>7}"
+    )
     for record in records:
         record.update(shortfall(record, reference))
         load = record.get("load") or record.get("load_before")
         cells = " ".join(f"{record['metrics'][m]:>13.4f}" for m in METRICS)
-        print(f"{record['name']:<32} {record['seconds']:>7.1f} {load[0]:>5.1f} {cells} "
-              f"{record['texture_match_pct']:>10.1f} {record['ssim_pct']:>12.1f} "
-              f"{(record.get('skips') or {}).get('hidden')!s:>7}")
+        print(
+            f"{record['name']:<32} {record['seconds']:>7.1f} {load[0]:>5.1f} {cells} "
+            f"{record['texture_match_pct']:>10.1f} {record['ssim_pct']:>12.1f} "
+            f"{(record.get('skips') or {}).get('hidden')!s:>7}"
+        )
     args.json.write_text(json.dumps({"reference": reference, "records": records}, indent=1))
     plot(records, args.png, args.reference_preset)
     print(f"records: {args.json}\nplot: {args.png}")

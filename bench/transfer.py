@@ -8,6 +8,7 @@ metrics). ``--profile`` runs under cProfile and splits the time into render forw
 forward, the other backward (VGG and losses), matching, the optimiser and the correct phases. Timings
 on a shared machine are noisy: the load average is printed and stored beside them.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -25,10 +26,11 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.transfer.config import TransferConfig, preset
-from gt2gs_blender.core.transfer.metrics import peak_memory_mib
 from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.metrics import peak_memory_mib
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.presets import preset
 
 SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
@@ -84,8 +86,11 @@ def profile_rows(stats: pstats.Stats) -> dict[str, float]:
         table[key] = (total + cumtime, tottime)
     rows = {}
     for label, wanted in PROFILE_PARTS.items():
-        rows[label] = sum(cum for (path, name), (cum, _) in table.items()
-                          if any(path.endswith(suffix) and name == fn for suffix, fn in wanted))
+        rows[label] = sum(
+            cum
+            for (path, name), (cum, _) in table.items()
+            if any(path.endswith(suffix) and name == fn for suffix, fn in wanted)
+        )
     rows["  render fwd (stylise)"] = _render_in(stats, "stylise_step")
     return rows
 
@@ -115,12 +120,24 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | No
     seconds = time.perf_counter() - start
     report = result.report
     record = {
-        "scene": str(args.scene), "texture": str(args.texture), "preset": args.preset, "overrides": overrides,
-        "seconds": seconds, "stage_seconds": report["stage_seconds"], "peak": peak_memory_mib(report["device"]),
-        "n_gaussians_start": len(scene), "n_gaussians": report["n_gaussians"], "n_views": report["n_views"],
-        "image_size": report["image_size"], "bank": report["bank"], "metrics": report["metrics"],
-        "skips": report.get("skips"), "stylise": {k: v for k, v in report["stylise"].items() if k != "densified"},
-        "load_before": load_before, "load_after": os.getloadavg(), "cpu_count": os.cpu_count(),
+        "scene": str(args.scene),
+        "texture": str(args.texture),
+        "preset": args.preset,
+        "overrides": overrides,
+        "seconds": seconds,
+        "stage_seconds": report["stage_seconds"],
+        "peak": peak_memory_mib(report["device"]),
+        "n_gaussians_start": len(scene),
+        "n_gaussians": report["n_gaussians"],
+        "n_views": report["n_views"],
+        "image_size": report["image_size"],
+        "bank": report["bank"],
+        "metrics": report["metrics"],
+        "skips": report.get("skips"),
+        "stylise": {k: v for k, v in report["stylise"].items() if k != "densified"},
+        "load_before": load_before,
+        "load_after": os.getloadavg(),
+        "cpu_count": os.cpu_count(),
     }
     if profiler is not None:
         record["profile"] = profile_rows(pstats.Stats(profiler))
@@ -129,13 +146,17 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | No
 
 def print_record(record: dict[str, Any]) -> None:
     """The table: stages, total, memory, metrics, and the profile when there is one."""
-    print(f"{Path(record['scene']).parent.name} x {Path(record['texture']).stem} x {record['preset']} "
-          f"{record['overrides'] or ''}  ({record['n_views']} views, {record['image_size'][0]} px, "
-          f"{record['n_gaussians_start']:,} -> {record['n_gaussians']:,} Gaussians)")
+    print(
+        f"{Path(record['scene']).parent.name} x {Path(record['texture']).stem} x {record['preset']} "
+        f"{record['overrides'] or ''}  ({record['n_views']} views, {record['image_size'][0]} px, "
+        f"{record['n_gaussians_start']:,} -> {record['n_gaussians']:,} Gaussians)"
+    )
     for stage, s in record["stage_seconds"].items():
         print(f"  {stage:<28} {s:>8.1f} s")
-    print(f"  {'total':<28} {record['seconds']:>8.1f} s   peak RSS {record['peak']['rss_peak_mib']:.0f} MiB   "
-          f"load {record['load_before'][0]:.1f} -> {record['load_after'][0]:.1f} on {record['cpu_count']} cores")
+    print(
+        f"  {'total':<28} {record['seconds']:>8.1f} s   peak RSS {record['peak']['rss_peak_mib']:.0f} MiB   "
+        f"load {record['load_before'][0]:.1f} -> {record['load_after'][0]:.1f} on {record['cpu_count']} cores"
+    )
     metrics = record["metrics"] or {}
     print("  " + "  ".join(f"{m} {metrics[m]:.4f}" for m in METRICS if metrics.get(m) is not None))
     for label, s in record.get("profile", {}).items():
@@ -149,8 +170,14 @@ def main() -> None:
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--views", type=int, help="automatic views (default: the preset's)")
     parser.add_argument("--weights", type=Path, default=SHARED / "weights")
-    parser.add_argument("--set", dest="overrides", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="TransferConfig settings over the preset")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="TransferConfig settings over the preset",
+    )
     parser.add_argument("--profile", action="store_true", help="split the time by component (cProfile)")
     parser.add_argument("--warm-bank", action="store_true", help="use the user's bank cache (not end to end)")
     parser.add_argument("--json", type=Path, help="default bench/out/transfer_<preset>.json")

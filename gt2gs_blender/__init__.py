@@ -3,6 +3,7 @@
 This file only registers the Blender parts. Blender modules are imported inside register() so the
 package (and its bpy-free ``core``) also imports in plain Python for the API, CLI and worker.
 """
+
 from __future__ import annotations
 
 _group = None

@@ -5,6 +5,7 @@ with 0 on success or 1 with one readable ``gt2gs: error: ...`` line on stderr. U
 extension when Blender has it enabled, else registers this source tree. Options: ``--preset``,
 ``--angle`` (degrees), ``--views N`` (automatic views), ``--weights DIR`` (VGG weights folder).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -13,6 +14,7 @@ import sys
 from pathlib import Path
 
 import bpy
+
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="blender -b --python batch.py --", description=__doc__.splitlines()[0])
@@ -28,7 +30,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
 
 def script_args(argv: list[str]) -> list[str]:
     """The arguments after ``--`` (Blender's own come before it)."""
-    return argv[argv.index("--") + 1:] if "--" in argv else []
+    return argv[argv.index("--") + 1 :] if "--" in argv else []
 
 
 def ensure_registered() -> None:

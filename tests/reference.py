@@ -6,6 +6,7 @@ the published one (``frustum_clamp``), written from the 3DGS / gsplat rule rathe
 engine, so an engine that drifts from it fails here. It also marks pixels where a rule decision is
 within rounding distance of its threshold, where float32 backends may legitimately decide the other way.
 """
+
 from __future__ import annotations
 
 import math
@@ -16,28 +17,37 @@ import numpy as np
 C0 = 0.28209479177387814
 C1 = 0.4886025119029199
 C2 = [1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396]
-C3 = [-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-      -0.4570457994644658, 1.445305721320277, -0.5900435899266435]
+C3 = [
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+]
 NEAR = 0.01
 BAND = 2e-4  # relative distance to a threshold below which a decision counts as ambiguous
 
 
 @dataclass
 class RefImage:
-    color: np.ndarray      # (H, W, 3)
-    depth: np.ndarray      # (H, W)
-    alpha: np.ndarray      # (H, W)
+    color: np.ndarray  # (H, W, 3)
+    depth: np.ndarray  # (H, W)
+    alpha: np.ndarray  # (H, W)
     ambiguous: np.ndarray  # (H, W) bool
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     n = np.linalg.norm(q)
     w, x, y, z = q / n if n > 1e-12 else np.array([1.0, 0, 0, 0])
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def sh_color(coeffs: np.ndarray, d: np.ndarray, degree: int) -> np.ndarray:
@@ -47,12 +57,23 @@ def sh_color(coeffs: np.ndarray, d: np.ndarray, degree: int) -> np.ndarray:
     if degree >= 1:
         basis += [-C1 * y, C1 * z, -C1 * x]
     if degree >= 2:
-        basis += [C2[0] * x * y, C2[1] * y * z, C2[2] * (2 * z * z - x * x - y * y), C2[3] * x * z,
-                  C2[4] * (x * x - y * y)]
+        basis += [
+            C2[0] * x * y,
+            C2[1] * y * z,
+            C2[2] * (2 * z * z - x * x - y * y),
+            C2[3] * x * z,
+            C2[4] * (x * x - y * y),
+        ]
     if degree >= 3:
-        basis += [C3[0] * y * (3 * x * x - y * y), C3[1] * x * y * z, C3[2] * y * (4 * z * z - x * x - y * y),
-                  C3[3] * z * (2 * z * z - 3 * x * x - 3 * y * y), C3[4] * x * (4 * z * z - x * x - y * y),
-                  C3[5] * z * (x * x - y * y), C3[6] * x * (x * x - 3 * y * y)]
+        basis += [
+            C3[0] * y * (3 * x * x - y * y),
+            C3[1] * x * y * z,
+            C3[2] * y * (4 * z * z - x * x - y * y),
+            C3[3] * z * (2 * z * z - 3 * x * x - 3 * y * y),
+            C3[4] * x * (4 * z * z - x * x - y * y),
+            C3[5] * z * (x * x - y * y),
+            C3[6] * x * (x * x - 3 * y * y),
+        ]
     rgb = sum(b * coeffs[i] for i, b in enumerate(basis)) + 0.5
     return np.maximum(rgb, 0.0)
 

@@ -1,4 +1,5 @@
 """AFCM: block DCT against OpenCV, frequency map, depth level and the weight formula."""
+
 from __future__ import annotations
 
 import cv2
@@ -6,7 +7,14 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.transfer.afcm import AFCMWeights, afcm_weight, block_dct, depth_level, high_frequency_energy, normalise_frequency
+from gt2gs_blender.core.transfer.afcm import (
+    AFCMWeights,
+    afcm_weight,
+    block_dct,
+    depth_level,
+    high_frequency_energy,
+    normalise_frequency,
+)
 
 
 def opencv_block_dct(gray: np.ndarray, block: int = 8) -> np.ndarray:
@@ -15,7 +23,7 @@ def opencv_block_dct(gray: np.ndarray, block: int = 8) -> np.ndarray:
     out = np.empty((h, w, block, block))
     for i in range(h):
         for j in range(w):
-            out[i, j] = cv2.dct(np.ascontiguousarray(gray[i * block:(i + 1) * block, j * block:(j + 1) * block]))
+            out[i, j] = cv2.dct(np.ascontiguousarray(gray[i * block : (i + 1) * block, j * block : (j + 1) * block]))
     return out
 
 

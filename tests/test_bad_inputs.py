@@ -4,6 +4,7 @@ nothing behind; the CLI turns all of it into exit code 2 and one line.
 
 Hypothesis generates the bad inputs (about 500 per run); every example runs under a time limit.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -24,34 +25,37 @@ import torch
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core import atomic
 from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.app.cli.demo import torus_scene
+from gt2gs_blender.core import atomic
 from gt2gs_blender.core.cameras.camera import MAX_IMAGE_SIDE, Camera
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
 from gt2gs_blender.core.cameras.files import load_views
-from gt2gs_blender.core.transfer.color_transfer import apply_to_scene, fit_color_transform
-from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.errors import CameraFileError, InputFileError, PlyFormatError
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.ply import read_ply, read_ply_arrays
 from gt2gs_blender.core.scene.ply_header import read_ply_header
 from gt2gs_blender.core.scene.ply_write import write_ply
-from gt2gs_blender.core.render import render
-from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture
+from gt2gs_blender.core.transfer.color_transfer import apply_to_scene, fit_color_transform
+from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture
 from gt2gs_blender.core.transfer.visibility import require_visible
 
 from .test_cameras import COLMAP_CAMERAS, colmap_images, write_colmap_binary, write_colmap_text
 from .test_ply import MUTATION, core_names, mutate, random_columns, raw_ply
 
-FUZZ = settings(deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow,
-                                                                     HealthCheck.function_scoped_fixture])
+FUZZ = settings(
+    deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]
+)
 
 
 def fuzz(examples: int) -> settings:
     """Hypothesis settings for a bad-input generator: ``examples`` inputs, no deadline or database."""
     return settings(FUZZ, max_examples=examples)
+
+
 pytestmark = pytest.mark.timeout(120)
 
 
@@ -75,23 +79,39 @@ def ply_files(draw) -> bytes:
     fmt = draw(st.sampled_from(["binary_little_endian", "binary_big_endian", "ascii", "binary", "ascii 2.0"]))
     lines = ["ply", f"format {fmt} 1.0" if " " not in fmt else f"format {fmt}"]
     for _ in range(draw(st.integers(0, 2))):
-        lines.append(draw(st.sampled_from(["comment made by hypothesis", "obj_info x", "element face 3",
-                                           "property list uchar int vertex_indices",
-                                           "element face 4294967295", "element edge -1"])))
+        lines.append(
+            draw(
+                st.sampled_from(
+                    [
+                        "comment made by hypothesis",
+                        "obj_info x",
+                        "element face 3",
+                        "property list uchar int vertex_indices",
+                        "element face 4294967295",
+                        "element edge -1",
+                    ]
+                )
+            )
+        )
     count = draw(st.one_of(st.integers(0, 4), st.sampled_from([2**32 - 1, 2**32, 10**30])))
     lines.append(f"element vertex {count}")
-    names = REQUIRED if draw(st.booleans()) else draw(st.lists(st.sampled_from(REQUIRED + ["nx", "f_rest_0"]),
-                                                             max_size=16))
+    names = (
+        REQUIRED if draw(st.booleans()) else draw(st.lists(st.sampled_from([*REQUIRED, "nx", "f_rest_0"]), max_size=16))
+    )
     for name in names:
         ply_type = "float" if draw(st.integers(0, 9)) else draw(st.sampled_from(PLY_TYPES))
         lines.append(f"property list uchar float {name}" if ply_type == "list" else f"property {ply_type} {name}")
-    lines += draw(st.lists(st.sampled_from(["property float extra", "element tail 1", "property uchar t",
-                                            "end_header"]), max_size=2))
+    lines += draw(
+        st.lists(
+            st.sampled_from(["property float extra", "element tail 1", "property uchar t", "end_header"]), max_size=2
+        )
+    )
     lines.append("end_header")
     header = "\n".join(lines).encode() + b"\n"
     if fmt == "ascii":
-        values = draw(st.lists(st.sampled_from(["0", "1.5", "-2", "nan", "inf", "1e40", "x", "255"]),
-                               max_size=3 * len(names) + 2))
+        values = draw(
+            st.lists(st.sampled_from(["0", "1.5", "-2", "nan", "inf", "1e40", "x", "255"]), max_size=3 * len(names) + 2)
+        )
         body = (" ".join(values) + "\n").encode() * draw(st.integers(0, 5))
     else:
         body = draw(st.binary(max_size=4 * len(names) * 5 + 8))
@@ -123,8 +143,9 @@ def test_generated_ply_files_load_or_raise_ply_format_error(tmp_path, data, drop
 def test_a_huge_list_element_count_fails_fast_instead_of_hanging(tmp_path, tail):
     """A 2^32-1 row face element before the vertices once looped four billion times over empty data."""
     props = [(name, "float") for name in REQUIRED]
-    data = raw_ply(props, random_columns(props, 0), before=(["element face 4294967295",
-                                                            "property list uchar int idx"], tail))
+    data = raw_ply(
+        props, random_columns(props, 0), before=(["element face 4294967295", "property list uchar int idx"], tail)
+    )
     path = tmp_path / "faces.ply"
     path.write_bytes(data)
     with pytest.raises(PlyFormatError, match="truncated: the data of element 'face' ends early"):
@@ -176,10 +197,20 @@ def camera_bases(root: Path) -> dict[str, tuple[str, bytes]]:
     write_colmap_binary(root / "bin", COLMAP_CAMERAS, images, points)
     buffer = io.BytesIO()
     np.save(buffer, llff_table())
-    entry = {"id": 0, "img_name": "a", "width": 64, "height": 48, "position": [0.0, 1.0, 2.0],
-             "rotation": np.eye(3).tolist(), "fx": 50.0, "fy": 51.0}
-    bases = {"cameras.json": ("cameras.json", json.dumps([entry, {**entry, "cx": 30.5}]).encode()),
-             "poses_bounds.npy": ("poses_bounds.npy", buffer.getvalue())}
+    entry = {
+        "id": 0,
+        "img_name": "a",
+        "width": 64,
+        "height": 48,
+        "position": [0.0, 1.0, 2.0],
+        "rotation": np.eye(3).tolist(),
+        "fx": 50.0,
+        "fy": 51.0,
+    }
+    bases = {
+        "cameras.json": ("cameras.json", json.dumps([entry, {**entry, "cx": 30.5}]).encode()),
+        "poses_bounds.npy": ("poses_bounds.npy", buffer.getvalue()),
+    }
     for kind, ext in (("text", ".txt"), ("bin", ".bin")):
         for stem in ("cameras", "images"):
             bases[f"{kind}/{stem}{ext}"] = (f"{stem}{ext}", (root / kind / f"{stem}{ext}").read_bytes())
@@ -201,14 +232,18 @@ def assert_loads_or_camera_file_error(path: Path) -> None:
     except CameraFileError as exc:
         assert str(path.parent) in exc.path and exc.path in str(exc) and "\n" not in str(exc)
         return
-    assert cameras and all(isinstance(c, Camera) and np.isfinite(c.world_to_cam).all()
-                           and 0 < c.width <= MAX_IMAGE_SIDE for c in cameras)
+    assert cameras and all(
+        isinstance(c, Camera) and np.isfinite(c.world_to_cam).all() and 0 < c.width <= MAX_IMAGE_SIDE for c in cameras
+    )
 
 
 @fuzz(150)
-@given(base=st.sampled_from(["cameras.json", "poses_bounds.npy", "text/cameras.txt", "text/images.txt",
-                             "bin/cameras.bin", "bin/images.bin"]),
-       mutations=st.lists(MUTATION, min_size=1, max_size=4))
+@given(
+    base=st.sampled_from(
+        ["cameras.json", "poses_bounds.npy", "text/cameras.txt", "text/images.txt", "bin/cameras.bin", "bin/images.bin"]
+    ),
+    mutations=st.lists(MUTATION, min_size=1, max_size=4),
+)
 def test_corrupted_camera_files_load_or_raise_camera_file_error(camera_root, tmp_path, base, mutations):
     root, bases = camera_root
     work = tmp_path / "work"
@@ -222,13 +257,26 @@ def test_corrupted_camera_files_load_or_raise_camera_file_error(camera_root, tmp
     assert_loads_or_camera_file_error(work / name)
 
 
-JSON_LEAF = st.one_of(st.none(), st.booleans(), st.integers(-10**400, 10**400),
-                      st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=5))
-JSON = st.recursive(JSON_LEAF, lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=4),
-                                                                                         inner, max_size=4),
-                    max_leaves=12)
-GOOD_ENTRY = {"width": 64, "height": 48, "position": [0.0, 1.0, 2.0], "rotation": np.eye(3).tolist(),
-              "fx": 50.0, "fy": 51.0}
+JSON_LEAF = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**400), 10**400),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=5),
+)
+JSON = st.recursive(
+    JSON_LEAF,
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=4), inner, max_size=4),
+    max_leaves=12,
+)
+GOOD_ENTRY = {
+    "width": 64,
+    "height": 48,
+    "position": [0.0, 1.0, 2.0],
+    "rotation": np.eye(3).tolist(),
+    "fx": 50.0,
+    "fy": 51.0,
+}
 
 
 @fuzz(100)
@@ -259,10 +307,18 @@ def npz_bytes() -> bytes:
 
 BAD_CAMERA_FILES = {
     "cameras.json": {
-        "integer-beyond-float": (b'[{"width": 64, "height": 48, "position": [0, 0, 0], "fx": 1' + b"0" * 400
-                                 + b', "fy": 5, "rotation": [[1,0,0],[0,1,0],[0,0,1]]}]', "fx must be a finite"),
-        "position-beyond-float": (json.dumps([{**GOOD_ENTRY, "position": [0, 0, 0]}]).replace(
-            "[0, 0, 0]", "[1" + "0" * 400 + ", 0, 0]").encode(), "position must be numbers"),
+        "integer-beyond-float": (
+            b'[{"width": 64, "height": 48, "position": [0, 0, 0], "fx": 1'
+            + b"0" * 400
+            + b', "fy": 5, "rotation": [[1,0,0],[0,1,0],[0,0,1]]}]',
+            "fx must be a finite",
+        ),
+        "position-beyond-float": (
+            json.dumps([{**GOOD_ENTRY, "position": [0, 0, 0]}])
+            .replace("[0, 0, 0]", "[1" + "0" * 400 + ", 0, 0]")
+            .encode(),
+            "position must be numbers",
+        ),
         "nested-too-deeply": (b"[" * 100_000 + b"]" * 100_000, "nested too deeply"),
         "image-too-large": (json.dumps([{**GOOD_ENTRY, "width": 10**15}]).encode(), "exceeds 65536"),
         "utf-16": (json.dumps([GOOD_ENTRY]).encode("utf-16"), "cannot read cameras.json"),
@@ -270,8 +326,10 @@ BAD_CAMERA_FILES = {
     },
     "poses_bounds.npy": {
         "header-promises-terabytes": (npy_header((10**12, 17)) + bytes(64), "truncated: the header promises"),
-        "corrupt-header-token": (npy_header((3, 17))[:10] + b"{'descr': '<f8', 'shape': (3,\x00" + bytes(60),
-                                 "cannot read poses_bounds.npy"),
+        "corrupt-header-token": (
+            npy_header((3, 17))[:10] + b"{'descr': '<f8', 'shape': (3,\x00" + bytes(60),
+            "cannot read poses_bounds.npy",
+        ),
         "unterminated-header": (npy_header((3, 17)).replace(b"}", b"("), "cannot read poses_bounds.npy"),
         "npz-archive": (npz_bytes(), "cannot read poses_bounds.npy"),
         "complex": (npy_header((2, 17), "<c16") + bytes(2 * 17 * 16), "expected real numbers"),
@@ -292,8 +350,10 @@ def test_bad_camera_files_raise_camera_file_error(tmp_path, name, case):
 
 
 @fuzz(40)
-@given(name=st.sampled_from(["cams.yaml", "poses.txt", "model.bin", "cameras.xml", "noext", "transforms.json"]),
-       data=st.binary(max_size=64))
+@given(
+    name=st.sampled_from(["cams.yaml", "poses.txt", "model.bin", "cameras.xml", "noext", "transforms.json"]),
+    data=st.binary(max_size=64),
+)
 def test_unknown_camera_formats_raise_camera_file_error(tmp_path, name, data):
     path = tmp_path / name
     path.write_bytes(data)
@@ -318,8 +378,14 @@ def png_chunk(kind: bytes, data: bytes) -> bytes:
 
 def grey_png(width: int, height: int, rows: bytes) -> bytes:
     """An 8-bit greyscale PNG with the given (filter byte + pixels) rows, possibly lying about its size."""
-    return b"".join([b"\x89PNG\r\n\x1a\n", png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)),
-                     png_chunk(b"IDAT", zlib.compress(rows)), png_chunk(b"IEND", b"")])
+    return b"".join(
+        [
+            b"\x89PNG\r\n\x1a\n",
+            png_chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)),
+            png_chunk(b"IDAT", zlib.compress(rows)),
+            png_chunk(b"IEND", b""),
+        ]
+    )
 
 
 def exr_bytes() -> bytes:
@@ -330,7 +396,7 @@ def exr_bytes() -> bytes:
 def test_a_texture_larger_than_the_limit_is_downscaled_with_a_warning(tmp_path):
     width, height = MAX_SIDE + 808, 1000
     stripes = np.zeros((height, width), np.uint8)
-    stripes[:, width // 2:] = 200
+    stripes[:, width // 2 :] = 200
     path = tmp_path / "big.png"
     path.write_bytes(grey_png(width, height, b"".join(b"\x00" + row.tobytes() for row in stripes)))
     with pytest.warns(UserWarning, match=f"is {width}x{height} px; downscaled to {MAX_SIDE}x"):
@@ -339,12 +405,15 @@ def test_a_texture_larger_than_the_limit_is_downscaled_with_a_warning(tmp_path):
     assert texture[:, :100].max() == 0.0 and np.allclose(texture[:, -100:], 200 / 255)
 
 
-@pytest.mark.parametrize("case, data, match", [
-    ("exr", exr_bytes(), "OPENCV_IO_ENABLE_OPENEXR"),
-    ("decompression-bomb", grey_png(40000, 30000, bytes(1000)), "more than 2\\^30 pixels"),
-    ("truncated-png", grey_png(64, 64, bytes(65 * 64))[:60], "not an image file"),
-    ("text", b"P3\nnot really an image", "not an image file"),
-])
+@pytest.mark.parametrize(
+    "case, data, match",
+    [
+        ("exr", exr_bytes(), "OPENCV_IO_ENABLE_OPENEXR"),
+        ("decompression-bomb", grey_png(40000, 30000, bytes(1000)), "more than 2\\^30 pixels"),
+        ("truncated-png", grey_png(64, 64, bytes(65 * 64))[:60], "not an image file"),
+        ("text", b"P3\nnot really an image", "not an image file"),
+    ],
+)
 def test_undecodable_textures_raise_input_file_error(tmp_path, case, data, match):
     path = tmp_path / f"{case}.img"
     path.write_bytes(data)
@@ -399,8 +468,18 @@ def test_constant_texture_and_constant_scene_colour_transfer_stays_finite(tmp_pa
 
 
 def tiny_config(tmp_path: Path) -> TransferConfig:
-    return TransferConfig(resolution=40, n_views=2, stylise_steps=2, n_scales=1, n_angles=2, texture_height=64,
-                          evaluate=False, gpb=False, densify=False, cache_dir=str(tmp_path / "banks"))
+    return TransferConfig(
+        resolution=40,
+        n_views=2,
+        stylise_steps=2,
+        n_scales=1,
+        n_angles=2,
+        texture_height=64,
+        evaluate=False,
+        gpb=False,
+        densify=False,
+        cache_dir=str(tmp_path / "banks"),
+    )
 
 
 @pytest.fixture
@@ -427,9 +506,27 @@ def test_cli_transfer_leaves_its_inputs_unchanged_and_writes_only_its_output(inp
     before = {p: sha256(p) for p in inputs}
     out = tmp_path / "out" / "styled.ply"
     out.parent.mkdir()
-    code = cli.main(["transfer", str(scene_path), str(texture_path), "-o", str(out), "--steps", "2",
-                     "--resolution", "40", "--views", "2", "--preset", "preview", "--backend", "torch",
-                     "--device", "cpu"])
+    code = cli.main(
+        [
+            "transfer",
+            str(scene_path),
+            str(texture_path),
+            "-o",
+            str(out),
+            "--steps",
+            "2",
+            "--resolution",
+            "40",
+            "--views",
+            "2",
+            "--preset",
+            "preview",
+            "--backend",
+            "torch",
+            "--device",
+            "cpu",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert {p: sha256(p) for p in inputs} == before
     assert sorted(p.name for p in out.parent.iterdir()) == ["styled.ply"]
@@ -463,9 +560,27 @@ def test_cli_transfer_whose_output_write_fails_leaves_nothing(inputs, tmp_path, 
     scene_path, texture_path = inputs
     out_dir = tmp_path / "out"
     out_dir.mkdir()
-    code = cli.main(["transfer", str(scene_path), str(texture_path), "-o", str(out_dir / "styled.ply"),
-                     "--steps", "1", "--resolution", "32", "--views", "2", "--preset", "preview",
-                     "--backend", "torch", "--device", "cpu"])
+    code = cli.main(
+        [
+            "transfer",
+            str(scene_path),
+            str(texture_path),
+            "-o",
+            str(out_dir / "styled.ply"),
+            "--steps",
+            "1",
+            "--resolution",
+            "32",
+            "--views",
+            "2",
+            "--preset",
+            "preview",
+            "--backend",
+            "torch",
+            "--device",
+            "cpu",
+        ]
+    )
     err = capsys.readouterr().err
     errors = [line for line in err.splitlines() if line.startswith("gt2gs: error: ")]
     assert code == 2 and len(errors) == 1 and "Traceback" not in err
@@ -490,8 +605,22 @@ def test_cli_drop_invalid_reports_the_dropped_count(tmp_path, capsys):
     code, out, err = cli_run(capsys, "info", str(path), "--drop-invalid", "--json")
     assert code == 0 and json.loads(out)["count"] == 3
     assert "gt2gs: warning:" in err and "dropped 2 of 5 Gaussians" in err
-    code, out, err = cli_run(capsys, "render", str(path), "--drop-invalid", "-o", str(tmp_path / "r"),
-                             "--views", "1", "--width", "16", "--backend", "torch", "--device", "cpu")
+    code, out, err = cli_run(
+        capsys,
+        "render",
+        str(path),
+        "--drop-invalid",
+        "-o",
+        str(tmp_path / "r"),
+        "--views",
+        "1",
+        "--width",
+        "16",
+        "--backend",
+        "torch",
+        "--device",
+        "cpu",
+    )
     assert code == 0 and "dropped 2 of 5 Gaussians" in err and (tmp_path / "r" / "view_000.png").is_file()
 
 
@@ -519,11 +648,13 @@ def test_cli_undecodable_texture_is_a_user_error(tmp_path, capsys, data):
 def test_cli_ply_with_a_huge_face_count_is_a_user_error(tmp_path, capsys):
     props = [(name, "float") for name in REQUIRED]
     path = tmp_path / "faces.ply"
-    path.write_bytes(raw_ply(props, random_columns(props, 0), before=(["element face 4294967295",
-                                                                     "property list uchar int idx"], b"")))
+    path.write_bytes(
+        raw_ply(
+            props, random_columns(props, 0), before=(["element face 4294967295", "property list uchar int idx"], b"")
+        )
+    )
     code, _, err = cli_run(capsys, "info", str(path))
     assert code == 2 and "truncated" in err and err.count("\n") == 1
-
 
 
 # -- a scene no view sees ---------------------------------------------------------------------------
@@ -532,7 +663,9 @@ def test_cli_ply_with_a_huge_face_count_is_a_user_error(tmp_path, capsys):
 def cameras_at(forward: float, centres: list[tuple[float, float, float]]) -> list[Camera]:
     """64 px cameras looking along +z (``forward`` 1) or -z (-1), OpenCV axes, at ``centres``."""
     rot = np.diag([1.0, forward, forward])
-    return [Camera.from_cam_to_world(rot, c, 40.0, 40.0, 32.0, 32.0, 64, 64, name=f"c{i}") for i, c in enumerate(centres)]
+    return [
+        Camera.from_cam_to_world(rot, c, 40.0, 40.0, 32.0, 32.0, 64, 64, name=f"c{i}") for i, c in enumerate(centres)
+    ]
 
 
 BLIND_CAMERAS = {  # the torus lies around the origin in the z = 0 plane, radius 1.4
@@ -549,8 +682,9 @@ def seen_pixels(scene: GaussianScene, cameras: list[Camera]) -> int:
 
 @pytest.mark.parametrize("case", sorted(BLIND_CAMERAS))
 @pytest.mark.parametrize("switches", [(), ("--no-color-transfer",)])
-def test_cli_transfer_with_cameras_that_see_nothing_is_one_error_naming_the_files(inputs, tmp_path, capsys, case,
-                                                                                   switches):
+def test_cli_transfer_with_cameras_that_see_nothing_is_one_error_naming_the_files(
+    inputs, tmp_path, capsys, case, switches
+):
     """Used to be a bare ValueError from the colour transfer, or (without it) a 'successful' no-op."""
     scene_path, texture_path = inputs
     cameras = BLIND_CAMERAS[case]
@@ -558,13 +692,33 @@ def test_cli_transfer_with_cameras_that_see_nothing_is_one_error_naming_the_file
     cams_path = tmp_path / "cameras.json"
     save_cameras_json(cams_path, cameras)
     out = tmp_path / "styled.ply"
-    code, _, err = cli_run(capsys, "transfer", str(scene_path), str(texture_path), "-o", str(out), "--cameras",
-                           str(cams_path), "--preset", "preview", "--steps", "1", "--resolution", "32",
-                           "--backend", "torch", "--device", "cpu", *switches)
+    code, _, err = cli_run(
+        capsys,
+        "transfer",
+        str(scene_path),
+        str(texture_path),
+        "-o",
+        str(out),
+        "--cameras",
+        str(cams_path),
+        "--preset",
+        "preview",
+        "--steps",
+        "1",
+        "--resolution",
+        "32",
+        "--backend",
+        "torch",
+        "--device",
+        "cpu",
+        *switches,
+    )
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
-    assert err == (f"gt2gs: error: {scene_path}: no Gaussian is visible in any of the 3 views of {cams_path}: "
-                   f"all 288 Gaussians are behind the cameras or outside their images; check that the cameras "
-                   f"belong to this scene (same coordinate frame and scale)\n")
+    assert err == (
+        f"gt2gs: error: {scene_path}: no Gaussian is visible in any of the 3 views of {cams_path}: "
+        f"all 288 Gaussians are behind the cameras or outside their images; check that the cameras "
+        f"belong to this scene (same coordinate frame and scale)\n"
+    )
     assert not out.exists()
 
 
@@ -576,21 +730,42 @@ def test_one_gaussian_seen_by_the_last_camera_is_enough(tmp_path):
     assert seen_pixels(one, cameras[:-1]) == 0 and 0 < seen_pixels(one, cameras) < 64 * 64 / 4
     config = TransferConfig(resolution=64, backend="torch", device="cpu")
     require_visible(one, cameras, config, tmp_path / "one.ply", "cameras.json")
-    with pytest.raises(InputFileError, match="no Gaussian is visible in any of the 3 views of cameras.json"):
+    with pytest.raises(InputFileError, match=r"no Gaussian is visible in any of the 3 views of cameras.json"):
         require_visible(one, cameras[:-1], config, tmp_path / "one.ply", "cameras.json")
 
 
 @pytest.mark.parametrize("case", ["all-transparent", "no-gaussians"])
 def test_cli_transfer_of_a_scene_nothing_of_which_can_show_is_one_error(inputs, tmp_path, capsys, case):
     torus = read_ply(inputs[0])
-    scene = replace(torus, opacity_logits=torch.full_like(torus.opacity_logits, -8.0)) if case == "all-transparent" \
+    scene = (
+        replace(torus, opacity_logits=torch.full_like(torus.opacity_logits, -8.0))
+        if case == "all-transparent"
         else torus.subset(torch.zeros(len(torus), dtype=torch.bool))
+    )
     scene_path = tmp_path / "invisible.ply"
     write_ply(scene_path, scene)
-    code, _, err = cli_run(capsys, "transfer", str(scene_path), str(inputs[1]), "-o", str(tmp_path / "o.ply"),
-                           "--views", "2", "--preset", "preview", "--resolution", "32", "--backend", "torch",
-                           "--device", "cpu")
+    code, _, err = cli_run(
+        capsys,
+        "transfer",
+        str(scene_path),
+        str(inputs[1]),
+        "-o",
+        str(tmp_path / "o.ply"),
+        "--views",
+        "2",
+        "--preset",
+        "preview",
+        "--resolution",
+        "32",
+        "--backend",
+        "torch",
+        "--device",
+        "cpu",
+    )
     assert code == 2 and err.count("\n") == 1 and err.startswith(f"gt2gs: error: {scene_path}: ")
-    assert ("all 288 Gaussians are fully transparent (opacity below 1/255)" if case == "all-transparent"
-            else "the file holds no Gaussians") in err
+    assert (
+        "all 288 Gaussians are fully transparent (opacity below 1/255)"
+        if case == "all-transparent"
+        else "the file holds no Gaussians"
+    ) in err
     assert not (tmp_path / "o.ply").exists()

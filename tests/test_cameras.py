@@ -4,6 +4,7 @@ Real data (fern LLFF poses, the garden cameras, the donut scene) comes from ../s
 skipped with a reason when absent; COLMAP fixtures are written here by a tiny writer that follows
 COLMAP's documented text and binary layouts.
 """
+
 from __future__ import annotations
 
 import json
@@ -18,12 +19,19 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core.cameras.generate import camera_path, arc_views, auto_views, estimate_up_axis, look_at, orbit_views
 from gt2gs_blender.core.cameras.camera import Camera, stack_cameras
-from gt2gs_blender.core.cameras.llff import LLFFData, load_llff
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
 from gt2gs_blender.core.cameras.colmap import load_colmap, load_colmap_points
 from gt2gs_blender.core.cameras.files import load_views
+from gt2gs_blender.core.cameras.generate import (
+    arc_views,
+    auto_views,
+    camera_path,
+    estimate_up_axis,
+    look_at,
+    orbit_views,
+)
+from gt2gs_blender.core.cameras.llff import LLFFData, load_llff
 from gt2gs_blender.core.errors import CameraFileError
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 
@@ -50,8 +58,17 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 def random_camera(rng: np.random.Generator, name: str = "", centred: bool = True) -> Camera:
     width, height = int(rng.integers(50, 900)), int(rng.integers(50, 900))
     cx, cy = (width / 2, height / 2) if centred else (rng.uniform(0, width), rng.uniform(0, height))
-    return Camera.from_cam_to_world(random_rotation(rng), rng.normal(size=3) * 5, rng.uniform(100, 1000),
-                                    rng.uniform(100, 1000), cx, cy, width, height, name)
+    return Camera.from_cam_to_world(
+        random_rotation(rng),
+        rng.normal(size=3) * 5,
+        rng.uniform(100, 1000),
+        rng.uniform(100, 1000),
+        cx,
+        cy,
+        width,
+        height,
+        name,
+    )
 
 
 def assert_same_camera(a: Camera, b: Camera, atol: float = 1e-12) -> None:
@@ -97,8 +114,9 @@ def test_scaled_resizes_image_coordinates() -> None:
     for factor in (0.5, 0.25):
         small = cam.scaled(factor)
         assert (small.width, small.height) == (640 * factor, 480 * factor)
-        np.testing.assert_allclose([small.fx, small.fy, small.cx, small.cy],
-                                   np.array([300, 310, 320.5, 240.25]) * factor)
+        np.testing.assert_allclose(
+            [small.fx, small.fy, small.cx, small.cy], np.array([300, 310, 320.5, 240.25]) * factor
+        )
         np.testing.assert_allclose(small.project(points.T)[0], uv * factor)
         np.testing.assert_array_equal(small.world_to_cam, cam.world_to_cam)
     odd = Camera(np.eye(4), 100, 100, 50.5, 30.5, 101, 61).scaled(0.5)
@@ -168,8 +186,9 @@ def test_camera_validation(kwargs: dict, match: str) -> None:
 
 def test_stack_cameras() -> None:
     rng = np.random.default_rng(1)
-    cams = [Camera.from_cam_to_world(random_rotation(rng), rng.normal(size=3), 50, 60, 32, 24, 64, 48)
-            for _ in range(3)]
+    cams = [
+        Camera.from_cam_to_world(random_rotation(rng), rng.normal(size=3), 50, 60, 32, 24, 64, 48) for _ in range(3)
+    ]
     viewmats, Ks, width, height = stack_cameras(cams, dtype=torch.float64)
     assert viewmats.shape == (3, 4, 4) and Ks.shape == (3, 3, 3) and (width, height) == (64, 48)
     assert viewmats.dtype == torch.float64
@@ -177,7 +196,7 @@ def test_stack_cameras() -> None:
     np.testing.assert_array_equal(Ks[2].numpy(), cams[2].K)
     assert stack_cameras(cams)[0].dtype == torch.float32
     with pytest.raises(ValueError, match="image size"):
-        stack_cameras(cams + [cams[0].scaled(0.5)])
+        stack_cameras([*cams, cams[0].scaled(0.5)])
     with pytest.raises(ValueError, match="at least one"):
         stack_cameras([])
 
@@ -206,8 +225,16 @@ def test_cameras_json_round_trip(tmp_path: Path) -> None:
 def test_cameras_json_official_layout(tmp_path: Path) -> None:
     """An entry as the INRIA trainer writes it: centre, camera->world rotation rows, cx = w/2."""
     rotation = [[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]  # right -y, down -z, forward +x
-    entry = {"id": 0, "img_name": "DSC0001", "width": 640, "height": 480,
-             "position": [1.0, 2.0, 3.0], "rotation": rotation, "fy": 500.0, "fx": 510.0}
+    entry = {
+        "id": 0,
+        "img_name": "DSC0001",
+        "width": 640,
+        "height": 480,
+        "position": [1.0, 2.0, 3.0],
+        "rotation": rotation,
+        "fy": 500.0,
+        "fx": 510.0,
+    }
     path = tmp_path / "cameras.json"
     path.write_text(json.dumps([entry]))
     (cam,) = load_cameras_json(path)
@@ -217,8 +244,16 @@ def test_cameras_json_official_layout(tmp_path: Path) -> None:
     assert (cam.fx, cam.fy, cam.cx, cam.cy, cam.name) == (510.0, 500.0, 320.0, 240.0, "DSC0001")
 
 
-GOOD_ENTRY = {"id": 0, "img_name": "a", "width": 64, "height": 48, "position": [0.0, 0.0, 0.0],
-              "rotation": np.eye(3).tolist(), "fy": 50.0, "fx": 50.0}
+GOOD_ENTRY = {
+    "id": 0,
+    "img_name": "a",
+    "width": 64,
+    "height": 48,
+    "position": [0.0, 0.0, 0.0],
+    "rotation": np.eye(3).tolist(),
+    "fy": 50.0,
+    "fx": 50.0,
+}
 
 
 @pytest.mark.parametrize(
@@ -268,8 +303,10 @@ def test_cameras_json_unreadable(tmp_path: Path) -> None:
 def garden_cameras() -> tuple[list[Camera], np.ndarray]:
     data = np.load(require(GARDEN))
     width, height = int(data["width"]), int(data["height"])
-    cams = [Camera(v.astype(np.float64), K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height, f"garden_{i}")
-            for i, (v, K) in enumerate(zip(data["viewmats"], data["Ks"]))]
+    cams = [
+        Camera(v.astype(np.float64), K[0, 0], K[1, 1], K[0, 2], K[1, 2], width, height, f"garden_{i}")
+        for i, (v, K) in enumerate(zip(data["viewmats"], data["Ks"]))
+    ]
     return cams, data["means3d"]
 
 
@@ -306,8 +343,8 @@ def test_fern_poses_convert_to_opencv(fern: tuple[LLFFData, np.ndarray]) -> None
     for cam, pose in zip(data.cameras, poses):
         np.testing.assert_allclose(cam.center, pose[:, 3], rtol=0, atol=1e-12)  # float64 rounding only
         R = cam.cam_to_world[:3, :3]
-        np.testing.assert_array_equal(R[:, 0], pose[:, 1])   # right = LLFF col 1
-        np.testing.assert_array_equal(R[:, 1], pose[:, 0])   # down  = LLFF col 0
+        np.testing.assert_array_equal(R[:, 0], pose[:, 1])  # right = LLFF col 1
+        np.testing.assert_array_equal(R[:, 1], pose[:, 0])  # down  = LLFF col 0
         np.testing.assert_array_equal(R[:, 2], -pose[:, 2])  # forward = -(back)
 
 
@@ -370,7 +407,7 @@ def test_llff_rounding_and_image_folders(tmp_path: Path) -> None:
         (tmp_path / "images_8" / name).write_bytes(b"")
     assert [p.name for p in load_llff(tmp_path, downscale=8).image_paths] == ["a.JPG", "b.png", "c.jpg"]
     (tmp_path / "images_8" / "d.png").write_bytes(b"")
-    with pytest.raises(CameraFileError, match="4 images but poses_bounds.npy has 3 poses"):
+    with pytest.raises(CameraFileError, match=r"4 images but poses_bounds.npy has 3 poses"):
         load_llff(tmp_path, downscale=8)
     with pytest.raises(CameraFileError, match="does not exist"):
         load_llff(tmp_path, image_dir="photos")
@@ -426,8 +463,14 @@ COLMAP_CAMERAS = {
 def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+    return np.array(
+        [
+            w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+            w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+            w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+            w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+        ]
+    )
 
 
 def quat_rotation(q: np.ndarray) -> np.ndarray:
@@ -440,15 +483,18 @@ def quat_rotation(q: np.ndarray) -> np.ndarray:
 def colmap_images(rng: np.random.Generator) -> list[tuple[int, np.ndarray, np.ndarray, int, str]]:
     """(image id, unnormalised quaternion, t, camera id, name); ids and names deliberately out of order."""
     names = ["frame 10.png", "frame_02.png", "a.jpg", "z/last.png", "b.jpg"]
-    return [(int(i * 3 + 1), rng.normal(size=4) * 2, rng.normal(size=3), cam_id, name)
-            for i, (cam_id, name) in enumerate(zip([2, 1, 3, 5, 7], names))]
+    return [
+        (int(i * 3 + 1), rng.normal(size=4) * 2, rng.normal(size=3), cam_id, name)
+        for i, (cam_id, name) in enumerate(zip([2, 1, 3, 5, 7], names))
+    ]
 
 
 def write_colmap_text(folder: Path, cameras: dict, images: list, points: tuple[np.ndarray, np.ndarray]) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     lines = ["# Camera list with one line of data per camera:", "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]"]
-    lines += [f"{cid} {model} {w} {h} " + " ".join(repr(p) for p in params)
-              for cid, (model, w, h, params) in cameras.items()]
+    lines += [
+        f"{cid} {model} {w} {h} " + " ".join(repr(p) for p in params) for cid, (model, w, h, params) in cameras.items()
+    ]
     (folder / "cameras.txt").write_text("\n".join(lines) + "\n")
     lines = ["# Image list with two lines of data per image:", "# Number of images: 5"]
     for k, (iid, q, t, cid, name) in enumerate(images):
@@ -457,8 +503,10 @@ def write_colmap_text(folder: Path, cameras: dict, images: list, points: tuple[n
     (folder / "images.txt").write_text("\n".join(lines) + "\n")
     xyz, rgb = points
     lines = ["# 3D point list with one line of data per point:"]
-    lines += [f"{i + 1} {x!r} {y!r} {z!r} {r} {g} {b} 0.5 1 0 3 2" for i, ((x, y, z), (r, g, b))
-              in enumerate(zip(xyz.tolist(), rgb.tolist()))]
+    lines += [
+        f"{i + 1} {x!r} {y!r} {z!r} {r} {g} {b} 0.5 1 0 3 2"
+        for i, ((x, y, z), (r, g, b)) in enumerate(zip(xyz.tolist(), rgb.tolist()))
+    ]
     (folder / "points3D.txt").write_text("\n".join(lines) + "\n")
 
 
@@ -486,8 +534,9 @@ def expected_colmap_cameras(images: list) -> list[Camera]:
     cams = []
     for _, q, t, cid, name in sorted(images, key=lambda im: im[4]):
         model, w, h, params = COLMAP_CAMERAS[cid]
-        fx, fy, cx, cy = (params[0], params[0], params[1], params[2]) if model.startswith(("SIMPLE", "RADIAL")) \
-            else params[:4]
+        fx, fy, cx, cy = (
+            (params[0], params[0], params[1], params[2]) if model.startswith(("SIMPLE", "RADIAL")) else params[:4]
+        )
         viewmat = np.eye(4)
         viewmat[:3, :3], viewmat[:3, 3] = quat_rotation(q), t
         cams.append(Camera(viewmat, fx, fy, cx, cy, w, h, name))
@@ -498,8 +547,10 @@ def expected_colmap_cameras(images: list) -> list[Camera]:
 def colmap_fixture(tmp_path: Path) -> tuple[Path, list, tuple[np.ndarray, np.ndarray]]:
     rng = np.random.default_rng(4)
     images = colmap_images(rng)
-    points = (rng.normal(size=(7, 3)).astype(np.float32).astype(np.float64),
-              rng.integers(0, 256, size=(7, 3)).astype(np.uint8))
+    points = (
+        rng.normal(size=(7, 3)).astype(np.float32).astype(np.float64),
+        rng.integers(0, 256, size=(7, 3)).astype(np.uint8),
+    )
     write_colmap_text(tmp_path / "text", COLMAP_CAMERAS, images, points)
     write_colmap_binary(tmp_path / "scene" / "sparse" / "0", COLMAP_CAMERAS, images, points)
     return tmp_path, images, points
@@ -552,7 +603,7 @@ def test_colmap_binary_truncated(colmap_fixture) -> None:
         full = (folder / name).read_bytes()
         for cut in (0, 4, 8, 20, len(full) // 2, len(full) - 1):
             (folder / name).write_bytes(full[:cut])
-            with pytest.raises(CameraFileError, match="truncated|unterminated"):
+            with pytest.raises(CameraFileError, match=r"truncated|unterminated"):
                 load_colmap(folder)
         (folder / name).write_bytes(full + b"\0\0")
         with pytest.raises(CameraFileError, match="trailing"):
@@ -670,8 +721,9 @@ def assert_neighbours_closest(cams: list[Camera], cyclic: bool) -> None:
     n = len(cams)
     for i in range(n - (0 if cyclic else 1)):
         j = (i + 1) % n
-        others = [k for k in range(n) if k not in (i, j, (i - 1) % n)] if cyclic else \
-            [k for k in range(n) if abs(k - i) > 1]
+        others = (
+            [k for k in range(n) if k not in (i, j, (i - 1) % n)] if cyclic else [k for k in range(n) if abs(k - i) > 1]
+        )
         assert all(dist[i, j] < dist[i, k] for k in others), (i, j)
 
 
@@ -712,8 +764,13 @@ def test_arc_views() -> None:
 
 @pytest.mark.parametrize(
     "kwargs, match",
-    [(dict(radius=0.0), "radius"), (dict(n=0), "at least one"), (dict(elevation_deg=90.0), "elevation"),
-     (dict(fov_deg=180.0), "fov"), (dict(up=(0, 0, 0)), "up")],
+    [
+        (dict(radius=0.0), "radius"),
+        (dict(n=0), "at least one"),
+        (dict(elevation_deg=90.0), "elevation"),
+        (dict(fov_deg=180.0), "fov"),
+        (dict(up=(0, 0, 0)), "up"),
+    ],
 )
 def test_orbit_views_validation(kwargs: dict, match: str) -> None:
     args = dict(center=(0, 0, 0), radius=1.0, n=4, width=32, height=32) | kwargs
@@ -732,8 +789,14 @@ def donut() -> GaussianScene:
     raw = require(DONUT).read_bytes()
     start = raw.index(b"end_header\n") + len(b"end_header\n")
     rows = torch.from_numpy(np.frombuffer(raw[start:], dtype="<f4").reshape(-1, 14).copy())
-    return GaussianScene(means=rows[:, 0:3], quats=rows[:, 10:14], log_scales=rows[:, 7:10],
-                         opacity_logits=rows[:, 6], sh_dc=rows[:, 3:6], sh_rest=torch.zeros(len(rows), 0, 3))
+    return GaussianScene(
+        means=rows[:, 0:3],
+        quats=rows[:, 10:14],
+        log_scales=rows[:, 7:10],
+        opacity_logits=rows[:, 6],
+        sh_dc=rows[:, 3:6],
+        sh_rest=torch.zeros(len(rows), 0, 3),
+    )
 
 
 def bounds_sphere(scene: GaussianScene) -> tuple[np.ndarray, float]:
@@ -761,7 +824,7 @@ def test_auto_views_frame_the_donut(donut: GaussianScene, kind: str, up) -> None
         assert np.all(depth > 0)
         assert np.all((uv >= 0) & (uv <= [cam.width, cam.height])), cam.name
         fill.append(max(np.ptp(uv[:, 0]) / cam.width, np.ptp(uv[:, 1]) / cam.height))
-        (_, v0), (_, v1) = cam.project(np.stack([center, center + [0.0, 0.0, 0.01]]))[0]
+        (_, v0), (_, v1) = cam.project(np.stack([center, center + np.array([0.0, 0.0, 0.01])]))[0]
         assert v1 < v0  # the donut's +z (icing side) is up in every image
     assert min(fill) > 0.6 and max(fill) > 0.7  # the box fills every frame (it is not centred: perspective)
 
@@ -786,8 +849,9 @@ def test_estimate_up_axis_flat_and_round() -> None:
 
 
 def test_auto_views_validation() -> None:
-    scene = GaussianScene.from_activated(torch.rand(50, 3), torch.full((50, 3), 0.01), torch.full((50,), 0.5),
-                                         torch.rand(50, 3))
+    scene = GaussianScene.from_activated(
+        torch.rand(50, 3), torch.full((50, 3), 0.01), torch.full((50,), 0.5), torch.rand(50, 3)
+    )
     with pytest.raises(ValueError, match="kind"):
         auto_views(scene, 4, kind="spiral")
     with pytest.raises(ValueError, match="up"):
@@ -814,7 +878,15 @@ def test_camera_path_through_an_orbit_turns_like_a_denser_orbit() -> None:
     assert (path[1].fx, path[1].width, path[1].height) == (coarse[0].fx, 64, 48)
     with pytest.raises(ValueError, match="frames_per_gap"):
         camera_path(coarse, 0)
-    flipped = Camera.from_cam_to_world(coarse[0].cam_to_world[:3, :3] @ np.diag([-1.0, -1.0, 1.0]) @ np.diag(
-        [1.0, -1.0, -1.0]), coarse[0].center, 50.0, 50.0, 32.0, 24.0, 64, 48)
+    flipped = Camera.from_cam_to_world(
+        coarse[0].cam_to_world[:3, :3] @ np.diag([-1.0, -1.0, 1.0]) @ np.diag([1.0, -1.0, -1.0]),
+        coarse[0].center,
+        50.0,
+        50.0,
+        32.0,
+        24.0,
+        64,
+        48,
+    )
     with pytest.raises(ValueError, match="180 degrees"):
         camera_path([coarse[0], flipped], 2)

@@ -5,6 +5,7 @@ backend (no compiler needed) except the demo and default-backend tests, which us
 choice (the fast CPU kernel where it builds); two run ``python -m gt2gs_blender`` as a real
 subprocess (one of them with its address space capped, to run out of memory for real).
 """
+
 from __future__ import annotations
 
 import json
@@ -21,8 +22,8 @@ import torch
 from gt2gs_blender.app.cli import demo, info
 from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.app.cli.demo import torus_scene
-from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
+from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.scene.ply_write import write_ply
 
@@ -92,8 +93,13 @@ def test_info_shared_donut(capsys):
 
 
 def test_info_as_subprocess(small_ply):
-    result = subprocess.run([sys.executable, "-m", "gt2gs_blender", "info", str(small_ply), "--json"],
-                            cwd=REPO, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [sys.executable, "-m", "gt2gs_blender", "info", str(small_ply), "--json"],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["count"] == 1200
 
@@ -103,8 +109,9 @@ def test_info_as_subprocess(small_ply):
 
 def test_render_generated_views(capsys, small_ply, tmp_path):
     out_dir = tmp_path / "renders"
-    code, out, err = run(capsys, "render", str(small_ply), "--views", "3", "--width", "64", "--depth",
-                         "-o", str(out_dir), *PORTABLE)
+    code, out, err = run(
+        capsys, "render", str(small_ply), "--views", "3", "--width", "64", "--depth", "-o", str(out_dir), *PORTABLE
+    )
     assert code == 0, err
     assert str(out_dir) in out and "backend torch" in out
     views = sorted(out_dir.glob("view_*.png"))
@@ -121,14 +128,34 @@ def test_render_cameras_json_at_their_size_and_scaled(capsys, small_ply, tmp_pat
     scene = read_ply(small_ply)
     cameras = auto_views(scene, 2, width=48, height=32) + auto_views(scene, 1, width=40, height=40)
     save_cameras_json(tmp_path / "cameras.json", cameras)
-    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path / "cameras.json"),
-                       "-o", str(tmp_path / "a"), "--background", "0,0,0", *PORTABLE)
+    code, _, err = run(
+        capsys,
+        "render",
+        str(small_ply),
+        "--cameras",
+        str(tmp_path / "cameras.json"),
+        "-o",
+        str(tmp_path / "a"),
+        "--background",
+        "0,0,0",
+        *PORTABLE,
+    )
     assert code == 0, err
     shapes = [read_png(tmp_path / "a" / f"view_{i:03d}.png").shape for i in range(3)]
     assert shapes == [(32, 48, 3), (32, 48, 3), (40, 40, 3)]
     assert foreground_fraction(tmp_path / "a" / "view_002.png", (0, 0, 0)) > 0.05
-    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path / "a"), "--scale", "0.5",
-                       "-o", str(tmp_path / "b"), *PORTABLE)
+    code, _, err = run(
+        capsys,
+        "render",
+        str(small_ply),
+        "--cameras",
+        str(tmp_path / "a"),
+        "--scale",
+        "0.5",
+        "-o",
+        str(tmp_path / "b"),
+        *PORTABLE,
+    )
     assert code == 0, err
     assert read_png(tmp_path / "b" / "view_000.png").shape == (16, 24, 3)
 
@@ -170,15 +197,16 @@ def test_malformed_ply_is_one_line(capsys, tmp_path):
 
 def test_bad_cameras_file_is_one_line(capsys, small_ply, tmp_path):
     cams = tmp_path / "cameras.json"
-    cams.write_text("[{\"width\": 10}]")
+    cams.write_text('[{"width": 10}]')
     code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(cams), "-o", str(tmp_path / "o"))
     assert code == 2
     assert_one_line_error(err, str(cams))
 
 
 def test_conflicting_options_are_user_errors(capsys, small_ply, tmp_path):
-    code, _, err = run(capsys, "render", str(small_ply), "--cameras", str(tmp_path), "--width", "10",
-                       "-o", str(tmp_path / "o"))
+    code, _, err = run(
+        capsys, "render", str(small_ply), "--cameras", str(tmp_path), "--width", "10", "-o", str(tmp_path / "o")
+    )
     assert code == 2
     assert_one_line_error(err, "--scale")
     code, _, err = run(capsys, "render", str(small_ply), "--background", "2,0,0", "-o", str(tmp_path))
@@ -244,8 +272,19 @@ def test_demo_generates_a_torus_without_shared(capsys, tmp_path, monkeypatch):
 def test_transfer_command_writes_scene_report_and_strip(capsys, small_ply, tmp_path, shared):
     out = tmp_path / "out.ply"
     texture = shared / "data" / "textures" / "brick_wall.jpg"
-    code, stdout, err = run(capsys, "transfer", str(small_ply), str(texture), "-o", str(out), *DEMO_FAST,
-                            "--report", str(tmp_path / "r.json"), "--strip", str(tmp_path / "s.png"))
+    code, _stdout, err = run(
+        capsys,
+        "transfer",
+        str(small_ply),
+        str(texture),
+        "-o",
+        str(out),
+        *DEMO_FAST,
+        "--report",
+        str(tmp_path / "r.json"),
+        "--strip",
+        str(tmp_path / "s.png"),
+    )
     assert code == 0, err
     assert len(read_ply(out)) == 1200
     report = json.loads((tmp_path / "r.json").read_text())
@@ -270,11 +309,33 @@ def test_transfer_out_of_memory_is_one_line_and_writes_nothing(small_ply, tmp_pa
     out = tmp_path / "out" / "styled.ply"
     out.parent.mkdir()
     result = subprocess.run(
-        [sys.executable, "-m", "gt2gs_blender", "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
-         "--report", str(out.parent / "r.json"), *PORTABLE, "--preset", "preview", "--views", "3", "--steps", "2",
-         "--resolution", "4096"],
-        cwd=REPO, capture_output=True, text=True, timeout=300,
-        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (cap, cap)))
+        [
+            sys.executable,
+            "-m",
+            "gt2gs_blender",
+            "transfer",
+            str(small_ply),
+            str(stripe_png(tmp_path)),
+            "-o",
+            str(out),
+            "--report",
+            str(out.parent / "r.json"),
+            *PORTABLE,
+            "--preset",
+            "preview",
+            "--views",
+            "3",
+            "--steps",
+            "2",
+            "--resolution",
+            "4096",
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_AS, (cap, cap)),
+    )
     assert result.returncode == 2, result.stderr
     errors = [line for line in result.stderr.splitlines() if line.startswith("gt2gs: error: ")]
     assert len(errors) == 1 and "Traceback" not in result.stderr
@@ -296,19 +357,44 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     region = tmp_path / "region.npy"
     np.save(region, np.arange(0, 1200, 4))
     out = tmp_path / "out.ply"
-    code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out),
-                       *DEMO_FAST, "--region", str(region), "--angle", "30", "--no-gt2", "--no-afcm", "--no-gpb",
-                       "--stylise-geometry", "--no-densify", "--no-skip-hidden", "--no-mixed-precision", "--threads", "1",
-                       "--texture-height", "96", "--depth-ratio", "1.5", "--object-backdrop",
-                       "--report", str(tmp_path / "r.json"))
+    code, _, err = run(
+        capsys,
+        "transfer",
+        str(small_ply),
+        str(stripe_png(tmp_path)),
+        "-o",
+        str(out),
+        *DEMO_FAST,
+        "--region",
+        str(region),
+        "--angle",
+        "30",
+        "--no-gt2",
+        "--no-afcm",
+        "--no-gpb",
+        "--stylise-geometry",
+        "--no-densify",
+        "--no-skip-hidden",
+        "--no-mixed-precision",
+        "--threads",
+        "1",
+        "--texture-height",
+        "96",
+        "--depth-ratio",
+        "1.5",
+        "--object-backdrop",
+        "--report",
+        str(tmp_path / "r.json"),
+    )
     assert code == 0, err
     before, after = read_ply(small_ply), read_ply(out)
     outside = np.setdiff1d(np.arange(1200), np.arange(0, 1200, 4))
-    assert torch.equal(after.means[:len(outside)], before.means[outside])
-    assert torch.equal(after.sh_dc[:len(outside)], before.sh_dc[outside])
+    assert torch.equal(after.means[: len(outside)], before.means[outside])
+    assert torch.equal(after.sh_dc[: len(outside)], before.sh_dc[outside])
     config = json.loads((tmp_path / "r.json").read_text())["config"]
-    assert config["angle"] == 30 and not any(config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden",
-                                                                   "mixed_precision"))
+    assert config["angle"] == 30 and not any(
+        config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden", "mixed_precision")
+    )
     assert config["threads"] == 1 and config["texture_height"] == 96
     assert config["stylise_geometry"] and config["object_backdrop"]
     assert config["depth_ratio"] == 1.5
@@ -317,7 +403,16 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
 def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):
     region = tmp_path / "region.npy"
     np.save(region, np.zeros((3, 3), dtype=np.float32))
-    code, _, err = run(capsys, "transfer", str(small_ply), str(stripe_png(tmp_path)), "-o",
-                       str(tmp_path / "o.ply"), *DEMO_FAST, "--region", str(region))
+    code, _, err = run(
+        capsys,
+        "transfer",
+        str(small_ply),
+        str(stripe_png(tmp_path)),
+        "-o",
+        str(tmp_path / "o.ply"),
+        *DEMO_FAST,
+        "--region",
+        str(region),
+    )
     assert code == 2
     assert_one_line_error(err, str(region))

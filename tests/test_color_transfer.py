@@ -1,4 +1,5 @@
 """Colour transfer: target statistics reached, degenerate inputs safe, and the SH-space map exact."""
+
 from __future__ import annotations
 
 import logging
@@ -8,9 +9,9 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.generate import orbit_views
-from gt2gs_blender.core.transfer.color_transfer import apply_to_images, apply_to_scene, fit_color_transform
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import SH_C0, GaussianScene
+from gt2gs_blender.core.transfer.color_transfer import apply_to_images, apply_to_scene, fit_color_transform
 
 
 def _coloured_pixels(n: int, mix: np.ndarray, mean: np.ndarray, seed: int) -> np.ndarray:
@@ -44,7 +45,7 @@ def test_output_has_the_texture_mean_and_covariance():
 
 def test_weights_restrict_the_statistics_to_covered_pixels():
     covered = _coloured_pixels(900, CONTENT_MIX, np.array([0.4, 0.5, 0.3]), 3)
-    images = np.concatenate([covered, np.zeros((300, 3))]).reshape(4, 30, 10, 3)   # black background
+    images = np.concatenate([covered, np.zeros((300, 3))]).reshape(4, 30, 10, 3)  # black background
     alpha = np.concatenate([np.ones(900), np.zeros(300)]).reshape(4, 30, 10)
     texture = _coloured_pixels(2000, TEXTURE_MIX, np.array([0.6, 0.3, 0.5]), 4).reshape(40, 50, 3)
     A, b = fit_color_transform(list(images), texture, weights=list(alpha))

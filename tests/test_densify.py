@@ -1,4 +1,5 @@
 """Density control keeps every per-Gaussian tensor aligned: parameters, Adam moments, masks, stats."""
+
 from __future__ import annotations
 
 import math
@@ -9,10 +10,16 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core.train.densify import DensifyConfig, DensityStats, apply_structure, densify_and_prune, reset_opacity
-from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam
 from gt2gs_blender.core.render.projection import Projection
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.train.densify import (
+    DensifyConfig,
+    DensityStats,
+    apply_structure,
+    densify_and_prune,
+    reset_opacity,
+)
+from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam
 
 EXTENT = 2.0
 CONFIG = DensifyConfig()
@@ -22,17 +29,24 @@ def random_scene(n: int, seed: int) -> GaussianScene:
     """n Gaussians with every tensor random, SH degree 1 and one extra property."""
     g = torch.Generator().manual_seed(seed)
     return GaussianScene(
-        means=torch.randn(n, 3, generator=g), quats=torch.randn(n, 4, generator=g),
-        log_scales=torch.randn(n, 3, generator=g) - 4.0, opacity_logits=torch.randn(n, generator=g) * 3,
-        sh_dc=torch.randn(n, 3, generator=g), sh_rest=torch.randn(n, 3, 3, generator=g),
+        means=torch.randn(n, 3, generator=g),
+        quats=torch.randn(n, 4, generator=g),
+        log_scales=torch.randn(n, 3, generator=g) - 4.0,
+        opacity_logits=torch.randn(n, generator=g) * 3,
+        sh_dc=torch.randn(n, 3, generator=g),
+        sh_rest=torch.randn(n, 3, 3, generator=g),
         extras={"nx": np.arange(n, dtype=np.float32)},
     )
 
 
 def trained_optimizer(n: int, seed: int, frozen: torch.Tensor) -> GaussianAdam:
     """An optimiser with non-zero moments on every row, a frozen mask and an attachment."""
-    opt = GaussianAdam(random_scene(n, seed), dict.fromkeys(PARAM_NAMES, 1e-3), frozen=frozen,
-                       attachments={"c_g": torch.arange(n, dtype=torch.float32)[:, None].repeat(1, 3)})
+    opt = GaussianAdam(
+        random_scene(n, seed),
+        dict.fromkeys(PARAM_NAMES, 1e-3),
+        frozen=frozen,
+        attachments={"c_g": torch.arange(n, dtype=torch.float32)[:, None].repeat(1, 3)},
+    )
     g = torch.Generator().manual_seed(seed + 1)
     for name in PARAM_NAMES:
         opt.exp_avg[name] = torch.randn(opt.exp_avg[name].shape, generator=g)
@@ -54,8 +68,11 @@ def snapshot(opt: GaussianAdam) -> dict[str, torch.Tensor]:
     out = {f"param.{k}": v.detach().clone() for k, v in opt.scene.tensors().items()}
     out |= {f"m.{k}": v.clone() for k, v in opt.exp_avg.items()}
     out |= {f"v.{k}": v.clone() for k, v in opt.exp_avg_sq.items()}
-    out |= {"frozen": opt.frozen.clone(), "c_g": opt.attachments["c_g"].clone(),
-            "nx": torch.from_numpy(opt.scene.extras["nx"].copy())}
+    out |= {
+        "frozen": opt.frozen.clone(),
+        "c_g": opt.attachments["c_g"].clone(),
+        "nx": torch.from_numpy(opt.scene.extras["nx"].copy()),
+    }
     return out
 
 
@@ -68,9 +85,15 @@ def assert_aligned(opt: GaussianAdam, stats: DensityStats) -> None:
         assert t.is_leaf and t.requires_grad, name
 
 
-masks = st.integers(1, 24).flatmap(lambda n: st.tuples(
-    st.just(n), st.lists(st.booleans(), min_size=n, max_size=n), st.lists(st.booleans(), min_size=n, max_size=n),
-    st.lists(st.integers(0, n - 1), max_size=12), st.integers(0, 2 ** 16)))
+masks = st.integers(1, 24).flatmap(
+    lambda n: st.tuples(
+        st.just(n),
+        st.lists(st.booleans(), min_size=n, max_size=n),
+        st.lists(st.booleans(), min_size=n, max_size=n),
+        st.lists(st.integers(0, n - 1), max_size=12),
+        st.integers(0, 2**16),
+    )
+)
 
 
 @settings(max_examples=60, deadline=None)
@@ -98,14 +121,15 @@ def test_restructure_keeps_survivors_and_zeroes_new_rows(case):
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.integers(1, 30), st.integers(0, 2 ** 16), st.floats(0.0, 1.0), st.booleans())
+@given(st.integers(1, 30), st.integers(0, 2**16), st.floats(0.0, 1.0), st.booleans())
 def test_densify_and_prune_accounts_for_every_gaussian(n, seed, frozen_fraction, prune_large):
     frozen = torch.rand(n, generator=torch.Generator().manual_seed(seed)) < frozen_fraction
     opt, stats = trained_optimizer(n, seed, frozen), random_stats(n, seed)
     before = snapshot(opt)
     grads = stats.mean_grad()
-    report = densify_and_prune(opt, stats, CONFIG, EXTENT, prune_large=prune_large,
-                               generator=torch.Generator().manual_seed(seed))
+    report = densify_and_prune(
+        opt, stats, CONFIG, EXTENT, prune_large=prune_large, generator=torch.Generator().manual_seed(seed)
+    )
     assert_aligned(opt, stats)
     assert report.total == len(opt.scene) == n - report.pruned - report.split + report.cloned + 2 * report.split
     assert not stats.count.any() and not stats.grad_sum.any()
@@ -121,20 +145,26 @@ def test_densify_and_prune_accounts_for_every_gaussian(n, seed, frozen_fraction,
     parents = after["nx"][survivors:].long()
     assert bool((grads[parents] >= CONFIG.grad_threshold).all())
     split_children = after["param.log_scales"][survivors:] != before["param.log_scales"][parents]
-    assert torch.allclose(after["param.log_scales"][survivors:][split_children],
-                          (before["param.log_scales"][parents] - math.log(1.6))[split_children])
+    assert torch.allclose(
+        after["param.log_scales"][survivors:][split_children],
+        (before["param.log_scales"][parents] - math.log(1.6))[split_children],
+    )
 
 
 def test_small_is_cloned_large_is_split_faint_is_pruned():
     scene = GaussianScene.from_activated(
-        torch.zeros(4, 3), torch.tensor([[0.001] * 3, [0.5] * 3, [0.001] * 3, [0.001] * 3]),
-        torch.tensor([0.5, 0.5, 0.001, 0.5]), torch.full((4, 3), 0.5))
+        torch.zeros(4, 3),
+        torch.tensor([[0.001] * 3, [0.5] * 3, [0.001] * 3, [0.001] * 3]),
+        torch.tensor([0.5, 0.5, 0.001, 0.5]),
+        torch.full((4, 3), 0.5),
+    )
     opt = GaussianAdam(scene, dict.fromkeys(PARAM_NAMES, 1e-3))
     stats = DensityStats(4)
     stats.grad_sum[:] = torch.tensor([1.0, 1.0, 1.0, 0.0])
     stats.count[:] = 1
-    report = densify_and_prune(opt, stats, CONFIG, EXTENT, prune_large=False,
-                               generator=torch.Generator().manual_seed(0))
+    report = densify_and_prune(
+        opt, stats, CONFIG, EXTENT, prune_large=False, generator=torch.Generator().manual_seed(0)
+    )
     assert (report.cloned, report.split, report.pruned, report.total) == (1, 1, 1, 5)
     scales = opt.scene.scales.detach()
     assert torch.allclose(scales[:3, 0], torch.tensor([0.001, 0.001, 0.001]))
@@ -144,8 +174,11 @@ def test_small_is_cloned_large_is_split_faint_is_pruned():
 
 def test_prune_large_by_screen_and_world_size():
     scene = GaussianScene.from_activated(
-        torch.zeros(3, 3), torch.tensor([[0.01] * 3, [0.01] * 3, [0.3] * 3]), torch.full((3,), 0.5),
-        torch.full((3, 3), 0.5))
+        torch.zeros(3, 3),
+        torch.tensor([[0.01] * 3, [0.01] * 3, [0.3] * 3]),
+        torch.full((3,), 0.5),
+        torch.full((3, 3), 0.5),
+    )
     for prune_large, expected in ((False, 3), (True, 1)):
         opt, stats = GaussianAdam(scene, dict.fromkeys(PARAM_NAMES, 1e-3)), DensityStats(3)
         stats.max_radius[:] = torch.tensor([5.0, 25.0, 5.0])
@@ -159,9 +192,16 @@ def fake_projection(gauss_ids: list[int], means2d_grad: list[list[float]], radii
     means2d.grad = torch.tensor(means2d_grad)
     empty = torch.zeros(m, 3)
     return Projection(
-        cam_ids=torch.zeros(m, dtype=torch.long), gauss_ids=torch.tensor(gauss_ids), means2d=means2d, conics=empty,
-        depths=torch.ones(m), opacities=torch.ones(m), colors=empty, tile_bbox=torch.zeros(m, 4, dtype=torch.int32),
-        radii=torch.tensor(radii)[:, None].repeat(1, 2))
+        cam_ids=torch.zeros(m, dtype=torch.long),
+        gauss_ids=torch.tensor(gauss_ids),
+        means2d=means2d,
+        conics=empty,
+        depths=torch.ones(m),
+        opacities=torch.ones(m),
+        colors=empty,
+        tile_bbox=torch.zeros(m, 4, dtype=torch.int32),
+        radii=torch.tensor(radii)[:, None].repeat(1, 2),
+    )
 
 
 def test_position_statistics_are_ndc_gradient_norms():

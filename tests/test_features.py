@@ -1,4 +1,5 @@
 """Feature extractor specs, shapes and taps; weight resolution order, fallback report and file errors."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,10 +8,16 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from gt2gs_blender.core.features import weights as weights_mod
 from gt2gs_blender.core.errors import GT2GSError, InputFileError
+from gt2gs_blender.core.features import weights as weights_mod
+from gt2gs_blender.core.features.extractor import (
+    FeatureExtractor,
+    build_layers,
+    load_feature_extractor,
+    mixed_precision_dtype,
+    random_init_,
+)
 from gt2gs_blender.core.features.specs import VGG16_RELU3, VGG19_NORM_RELU3
-from gt2gs_blender.core.features.extractor import FeatureExtractor, build_layers, load_feature_extractor, mixed_precision_dtype, random_init_
 from gt2gs_blender.core.features.weights import ENV_VAR, ResolvedWeights, resolve_weights
 
 from .test_ssim import fern_rgb
@@ -63,11 +70,19 @@ def distance(a: torch.Tensor, b: torch.Tensor) -> float:
 
 # -- specs and the extractor ---------------------------------------------------------------------------
 def test_specs_match_torchvision_layout():
-    assert VGG16_RELU3.relu_indices == {"relu1_1": 1, "relu1_2": 3, "relu2_1": 6, "relu2_2": 8,
-                                        "relu3_1": 11, "relu3_2": 13, "relu3_3": 15}
+    assert VGG16_RELU3.relu_indices == {
+        "relu1_1": 1,
+        "relu1_2": 3,
+        "relu2_1": 6,
+        "relu2_2": 8,
+        "relu3_1": 11,
+        "relu3_2": 13,
+        "relu3_3": 15,
+    }
     assert VGG16_RELU3.out_channels == 768 and VGG19_NORM_RELU3.out_channels == 128 + 256
     assert sorted(VGG19_NORM_RELU3.parameter_shapes()) == sorted(
-        f"features.{i}.{p}" for i in (0, 2, 5, 7, 10) for p in ("weight", "bias"))
+        f"features.{i}.{p}" for i in (0, 2, 5, 7, 10) for p in ("weight", "bias")
+    )
     assert VGG19_NORM_RELU3.with_taps("relu1_2").depth == 4 and VGG19_NORM_RELU3.with_taps("relu1_2").stride == 1
     with pytest.raises(ValueError, match="relu3_2"):
         VGG19_NORM_RELU3.with_taps("relu3_2")
@@ -89,10 +104,11 @@ def test_taps_are_concatenated_in_order_after_imagenet_normalisation():
     assert torch.equal(net.layers[14].weight, weights.state_dict["features.14.weight"])
     images = torch.rand(1, 3, 32, 24)
     x = (images - torch.tensor([0.485, 0.456, 0.406]).reshape(1, 3, 1, 1)) / torch.tensor(
-        [0.229, 0.224, 0.225]).reshape(1, 3, 1, 1)
+        [0.229, 0.224, 0.225]
+    ).reshape(1, 3, 1, 1)
     out = net(images)
     for k, index in enumerate((11, 13, 15)):
-        torch.testing.assert_close(out[:, 256 * k: 256 * (k + 1)], net.layers[: index + 1](x))
+        torch.testing.assert_close(out[:, 256 * k : 256 * (k + 1)], net.layers[: index + 1](x))
 
 
 def test_reflection_padding_keeps_a_flat_image_flat():
@@ -107,9 +123,11 @@ def test_fingerprint_tracks_weights_taps_and_scale():
     spec = VGG19_NORM_RELU3
     base = FeatureExtractor(spec, random_weights(spec)).fingerprint
     assert FeatureExtractor(spec, random_weights(spec)).fingerprint == base
-    others = [FeatureExtractor(spec, random_weights(spec, seed=2)),
-              FeatureExtractor(spec, random_weights(spec), scale=1.0),
-              FeatureExtractor(spec.with_taps("relu3_1"), random_weights(spec))]
+    others = [
+        FeatureExtractor(spec, random_weights(spec, seed=2)),
+        FeatureExtractor(spec, random_weights(spec), scale=1.0),
+        FeatureExtractor(spec.with_taps("relu3_1"), random_weights(spec)),
+    ]
     assert len({base, *(net.fingerprint for net in others)}) == 4
 
 
@@ -235,8 +253,10 @@ def test_float16_convolutions_stay_close_to_float32(shared, monkeypatch):
     bank = F.normalize(exact(fern(shared, 10)).flatten(2)[0].T, dim=1)
     same = ((rows32 @ bank.T).argmax(1) == (rows16 @ bank.T).argmax(1)).float().mean()
     assert same >= 0.98
-    grads = [torch.autograd.grad((1 - (F.normalize(f.flatten(2)[0].T, dim=1) * bank[:1]).sum(1)).mean(), image)[0]
-             for f in (f32, f16)]
+    grads = [
+        torch.autograd.grad((1 - (F.normalize(f.flatten(2)[0].T, dim=1) * bank[:1]).sum(1)).mean(), image)[0]
+        for f in (f32, f16)
+    ]
     assert F.cosine_similarity(grads[0].flatten(), grads[1].flatten(), dim=0) > 0.99
 
 

@@ -1,4 +1,5 @@
 """The fit engine: Adam and its masks, a one-Gaussian fit, the loss on real photos, the fit command."""
+
 from __future__ import annotations
 
 import json
@@ -9,16 +10,16 @@ import torch
 
 from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
-from gt2gs_blender.core.cameras.llff import load_llff
 from gt2gs_blender.core.cameras.generate import orbit_views
-from gt2gs_blender.core.train.densify import DensifyConfig
-from gt2gs_blender.core.fit.trainer import FitConfig, Trainer, evaluate, llff_split, load_images
-from gt2gs_blender.core.train.reconstruction import reconstruction_loss
+from gt2gs_blender.core.cameras.llff import load_llff
 from gt2gs_blender.core.fit.init import frustum_points, knn_scales, scene_from_points
-from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam, LearningRates, exponential_decay
-from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.fit.trainer import FitConfig, Trainer, evaluate, llff_split, load_images
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.train.densify import DensifyConfig
+from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam, LearningRates, exponential_decay
+from gt2gs_blender.core.train.reconstruction import reconstruction_loss
 
 FAST_LRS = LearningRates(means=3e-3, means_final=3e-4, quats=1e-2, log_scales=1e-2, sh_dc=1e-2)
 """Learning rates for tiny synthetic fits (3DGS's are tuned for 30k steps)."""
@@ -27,8 +28,12 @@ FAST_LRS = LearningRates(means=3e-3, means_final=3e-4, quats=1e-2, log_scales=1e
 def random_scene(n: int, seed: int = 0, spread: float = 0.5) -> GaussianScene:
     g = torch.Generator().manual_seed(seed)
     return GaussianScene.from_activated(
-        (torch.rand(n, 3, generator=g) - 0.5) * 2 * spread, torch.rand(n, 3, generator=g) * 0.1 + 0.03,
-        torch.rand(n, generator=g) * 0.8 + 0.1, torch.rand(n, 3, generator=g), sh_degree=1)
+        (torch.rand(n, 3, generator=g) - 0.5) * 2 * spread,
+        torch.rand(n, 3, generator=g) * 0.1 + 0.03,
+        torch.rand(n, generator=g) * 0.8 + 0.1,
+        torch.rand(n, 3, generator=g),
+        sh_degree=1,
+    )
 
 
 def views(n: int = 6, size: int = 32):
@@ -113,8 +118,9 @@ def test_only_trainable_tensors_change():
     target = random_scene(40, seed=1)
     cameras = views(4)
     start = random_scene(40, seed=2)
-    trainer = Trainer(start, cameras, renders(target, cameras), FitConfig(iterations=10, densify_until=0),
-                      trainable={"sh_dc"})
+    trainer = Trainer(
+        start, cameras, renders(target, cameras), FitConfig(iterations=10, densify_until=0), trainable={"sh_dc"}
+    )
     scene = trainer.run()
     for name, t in scene.tensors().items():
         assert torch.equal(t, start.tensors()[name]) == (name != "sh_dc"), name
@@ -127,17 +133,26 @@ def test_one_gaussian_fit_recovers_the_target():
     """Render a known Gaussian from 6 views, start from a perturbed isotropic one, recover position,
     covariance and opacity x colour (the only colour quantity one Gaussian over black determines)."""
     target = GaussianScene.from_activated(
-        torch.tensor([[0.1, -0.05, 0.0]]), torch.tensor([[0.3, 0.15, 0.08]]), torch.tensor([0.8]),
-        torch.tensor([[0.9, 0.4, 0.2]]), quats=torch.tensor([[0.9, 0.2, -0.3, 0.1]]))
-    start = GaussianScene.from_activated(torch.tensor([[0.0, 0.0, 0.1]]), torch.full((1, 3), 0.2),
-                                         torch.tensor([0.5]), torch.full((1, 3), 0.5))
+        torch.tensor([[0.1, -0.05, 0.0]]),
+        torch.tensor([[0.3, 0.15, 0.08]]),
+        torch.tensor([0.8]),
+        torch.tensor([[0.9, 0.4, 0.2]]),
+        quats=torch.tensor([[0.9, 0.2, -0.3, 0.1]]),
+    )
+    start = GaussianScene.from_activated(
+        torch.tensor([[0.0, 0.0, 0.1]]), torch.full((1, 3), 0.2), torch.tensor([0.5]), torch.full((1, 3), 0.5)
+    )
     cameras = views(6, size=40)
     config = FitConfig(iterations=300, densify_until=0, sh_interval=0, lrs=FAST_LRS)
     fitted = Trainer(start, cameras, renders(target, cameras), config).run()
     torch.testing.assert_close(fitted.means, target.means, atol=3e-3, rtol=0)
     torch.testing.assert_close(covariance(fitted), covariance(target), atol=3e-3, rtol=0)
-    torch.testing.assert_close(fitted.opacities[:, None] * fitted.base_colors,
-                               target.opacities[:, None] * target.base_colors, atol=0.01, rtol=0)
+    torch.testing.assert_close(
+        fitted.opacities[:, None] * fitted.base_colors,
+        target.opacities[:, None] * target.base_colors,
+        atol=0.01,
+        rtol=0,
+    )
 
 
 def test_frozen_gaussians_are_bit_identical_through_densification():
@@ -145,8 +160,15 @@ def test_frozen_gaussians_are_bit_identical_through_densification():
     start.extras = {"tag": torch.arange(120).numpy()}
     cameras = views(6)
     frozen = torch.arange(120) % 4 == 0
-    config = FitConfig(iterations=60, densify_from=5, densify_every=10, densify_until=60, opacity_reset_every=30,
-                       lrs=FAST_LRS, densify=DensifyConfig(grad_threshold=1e-6))
+    config = FitConfig(
+        iterations=60,
+        densify_from=5,
+        densify_every=10,
+        densify_until=60,
+        opacity_reset_every=30,
+        lrs=FAST_LRS,
+        densify=DensifyConfig(grad_threshold=1e-6),
+    )
     trainer = Trainer(start, cameras, renders(target, cameras), config, frozen=frozen, extent=1.0)
     scene = trainer.run()
     assert len(scene) != len(start)  # densification and pruning did happen
@@ -161,10 +183,19 @@ def test_render_colors_attachment_is_rendered_and_follows_densification():
     target = random_scene(60, seed=5)
     cameras = views(4)
     wrong = GaussianScene(**{**target.tensors(), "sh_dc": torch.zeros(60, 3)})
-    config = FitConfig(iterations=20, densify_from=0, densify_every=10, lrs=FAST_LRS,
-                       densify=DensifyConfig(grad_threshold=1e-7))
-    trainer = Trainer(wrong, cameras, renders(target, cameras), config, trainable={"means", "log_scales"},
-                      attachments={"c_g": target.base_colors}, render_colors="c_g", extent=1.0)
+    config = FitConfig(
+        iterations=20, densify_from=0, densify_every=10, lrs=FAST_LRS, densify=DensifyConfig(grad_threshold=1e-7)
+    )
+    trainer = Trainer(
+        wrong,
+        cameras,
+        renders(target, cameras),
+        config,
+        trainable={"means", "log_scales"},
+        attachments={"c_g": target.base_colors},
+        render_colors="c_g",
+        extent=1.0,
+    )
     assert trainer.step() < 1e-3
     trainer.run()
     assert trainer.opt.attachments["c_g"].shape == (len(trainer.scene), 3) and len(trainer.scene) > 60
@@ -181,15 +212,21 @@ def test_knn_scales_and_point_initialisation():
 
 def test_frustum_points_lie_in_the_views_between_the_bounds():
     cameras = views(3)
-    points, colors, scales = frustum_points(cameras, [2.0] * 3, [4.0] * 3, 500,
-                                            generator=torch.Generator().manual_seed(0))
+    points, colors, scales = frustum_points(
+        cameras, [2.0] * 3, [4.0] * 3, 500, generator=torch.Generator().manual_seed(0)
+    )
     assert points.shape == (500, 3) and colors.shape == (500, 3) and bool((scales > 0).all())
     seen = torch.zeros(500, dtype=torch.bool)
     for camera in cameras:
         uv, depth = camera.project(points.double().numpy())
         uv, depth = torch.from_numpy(uv), torch.from_numpy(depth)
-        inside = (depth > 2.0 - 1e-4) & (depth < 4.0 + 1e-4) & (uv >= 0).all(1) \
-            & (uv[:, 0] <= camera.width) & (uv[:, 1] <= camera.height)
+        inside = (
+            (depth > 2.0 - 1e-4)
+            & (depth < 4.0 + 1e-4)
+            & (uv >= 0).all(1)
+            & (uv[:, 0] <= camera.width)
+            & (uv[:, 1] <= camera.height)
+        )
         seen |= inside
     assert bool(seen.all())
 
@@ -212,10 +249,17 @@ def test_loss_decreases_on_a_tiny_real_crop(shared):
     data = load_llff(shared / "data" / "scenes" / "fern_llff", downscale=32, image_dir="images_8")
     cameras = data.cameras[1:5]
     images = load_images(data.image_paths[1:5], cameras[0].width, cameras[0].height)
-    points, colors, scales = frustum_points(cameras, data.bounds[1:5, 0], data.bounds[1:5, 1], 3000, images=images,
-                                            generator=torch.Generator().manual_seed(0))
-    trainer = Trainer(scene_from_points(points, colors, scales=scales), cameras, images,
-                      FitConfig(iterations=60, densify_until=0))
+    points, colors, scales = frustum_points(
+        cameras,
+        data.bounds[1:5, 0],
+        data.bounds[1:5, 1],
+        3000,
+        images=images,
+        generator=torch.Generator().manual_seed(0),
+    )
+    trainer = Trainer(
+        scene_from_points(points, colors, scales=scales), cameras, images, FitConfig(iterations=60, densify_until=0)
+    )
     losses = [trainer.step() for _ in range(60)]
     first, last = sum(losses[:10]) / 10, sum(losses[-10:]) / 10
     assert last < 0.8 * first
@@ -225,8 +269,22 @@ def test_loss_decreases_on_a_tiny_real_crop(shared):
 
 def test_fit_command_writes_the_inria_layout_and_a_report(shared, tmp_path, capsys):
     out, report = tmp_path / "fern", tmp_path / "report.json"
-    code = cli.main(["fit", str(shared / "data" / "scenes" / "fern_llff"), "--out", str(out), "--iterations", "20",
-                     "--downscale", "32", "--points", "2000", "--report", str(report)])
+    code = cli.main(
+        [
+            "fit",
+            str(shared / "data" / "scenes" / "fern_llff"),
+            "--out",
+            str(out),
+            "--iterations",
+            "20",
+            "--downscale",
+            "32",
+            "--points",
+            "2000",
+            "--report",
+            str(report),
+        ]
+    )
     stdout, stderr = capsys.readouterr()
     assert code == 0, stderr
     values = json.loads(report.read_text())
@@ -234,7 +292,9 @@ def test_fit_command_writes_the_inria_layout_and_a_report(shared, tmp_path, caps
     assert values["test_psnr"] > 5 and 0 < values["test_ssim"] <= 1
     assert "PSNR" in stdout and "SSIM" in stdout
     scene = read_ply(out / "point_cloud.ply")
-    assert len(scene) == values["n_gaussians"] == len(read_ply(out / "point_cloud" / "iteration_20" / "point_cloud.ply"))
+    assert (
+        len(scene) == values["n_gaussians"] == len(read_ply(out / "point_cloud" / "iteration_20" / "point_cloud.ply"))
+    )
     assert len(load_cameras_json(out / "cameras.json")) == 20
 
 
@@ -249,5 +309,7 @@ def test_reconstruction_tolerance_passes_no_gradient_below_it_and_the_same_direc
     reconstruction_loss(tiny, target).backward()
     assert tiny.grad.abs().max() > 0
     far = (target + 0.2 * torch.randn(24, 24, 3, generator=generator)).requires_grad_()
-    grads = [torch.autograd.grad(reconstruction_loss(far, target, tolerance=t), far)[0].flatten() for t in (0.0, 0.5 / 255)]
+    grads = [
+        torch.autograd.grad(reconstruction_loss(far, target, tolerance=t), far)[0].flatten() for t in (0.0, 0.5 / 255)
+    ]
     assert torch.nn.functional.cosine_similarity(grads[0], grads[1], dim=0) > 0.99

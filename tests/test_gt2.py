@@ -1,6 +1,8 @@
 """GT² geometry: rotation between views, prior angles carried across views, matching with a prior."""
+
 from __future__ import annotations
 
+import itertools
 import math
 
 import cv2
@@ -9,9 +11,18 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.camera import Camera
-from gt2gs_blender.core.transfer.gt2 import Match, angle_distance, distortion, fit_linear_maps, match_with_prior, prior_link, rotation_angle, view_order
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.gt2 import (
+    Match,
+    angle_distance,
+    distortion,
+    fit_linear_maps,
+    match_with_prior,
+    prior_link,
+    rotation_angle,
+    view_order,
+)
 from gt2gs_blender.core.transfer.texture_bank import TextureBank
 
 SIZE = 96
@@ -27,8 +38,14 @@ def wall(n: int = 90) -> GaussianScene:
     spacing = float(coords[1] - coords[0])
     scales = torch.tensor([spacing * 0.6, spacing * 0.6, 1e-3]).expand(n * n, 3)
     px, py = means[:, 0], means[:, 1]
-    colors = torch.stack([0.5 + 0.4 * torch.sin(4 * px + 1.3 * py), 0.5 + 0.4 * torch.cos(3 * py - 0.5 * px),
-                          0.5 + 0.3 * torch.sin(2.5 * px * py)], -1)
+    colors = torch.stack(
+        [
+            0.5 + 0.4 * torch.sin(4 * px + 1.3 * py),
+            0.5 + 0.4 * torch.cos(3 * py - 0.5 * px),
+            0.5 + 0.3 * torch.sin(2.5 * px * py),
+        ],
+        -1,
+    )
     return GaussianScene.from_activated(means, scales, torch.full((n * n,), 0.99), colors)
 
 
@@ -52,8 +69,9 @@ def test_rotation_angle_follows_the_texture_bank_convention():
         rotation = cv2.getRotationMatrix2D((10.0, 7.0), alpha, 1.0)
         previous = rng.uniform(0, 20, size=(40, 2))
         current = previous @ rotation[:, :2].T + rotation[:, 2]
-        maps, _, count = fit_linear_maps(torch.tensor(current), torch.tensor(previous),
-                                         torch.zeros(40, dtype=torch.long), torch.ones(40), 1)
+        maps, _, count = fit_linear_maps(
+            torch.tensor(current), torch.tensor(previous), torch.zeros(40, dtype=torch.long), torch.ones(40), 1
+        )
         assert int(count[0]) == 40
         assert float(angle_distance(rotation_angle(maps), torch.tensor([alpha], dtype=maps.dtype))[0]) < 1e-6
 
@@ -67,7 +85,7 @@ def test_fit_linear_maps_recovers_affine_maps_per_cell_and_skips_degenerate_cell
     weight = torch.ones(90)
     weight[cell == 2] = 0.0
     weight[2] = 1.0  # cell 2 keeps one point: too few to fit
-    maps, mean, count = fit_linear_maps(src, dst, cell, weight, 4)
+    maps, _mean, count = fit_linear_maps(src, dst, cell, weight, 4)
     assert torch.allclose(maps[:2], truth[:2], atol=1e-9)
     assert count.tolist() == [30.0, 30.0, 0.0, 0.0] and maps[2:].abs().max() == 0
     # a reflection's nearest rotation is still a proper rotation
@@ -84,15 +102,19 @@ def test_beta_from_two_views_of_a_plane_matches_the_image_rotation(roll):
     img1, d1, a1 = rendered(scene, cam1)
     link = prior_link(cam1, d1, a1, cam0, d0, a0, (12, 12))
     rows, cols = torch.meshgrid(torch.arange(12) - 5.5, torch.arange(12) - 5.5, indexing="ij")
-    assert bool(link.valid[rows.square() + cols.square() < 4.5 ** 2].all())  # the corners turn out of view
+    assert bool(link.valid[rows.square() + cols.square() < 4.5**2].all())  # the corners turn out of view
     betas = link.beta[link.valid]
-    assert float(angle_distance(betas, torch.tensor(abs(roll))).min(angle_distance(betas, torch.tensor(-abs(roll))))
-                 .max()) < 2.0
+    assert (
+        float(angle_distance(betas, torch.tensor(abs(roll))).min(angle_distance(betas, torch.tensor(-abs(roll)))).max())
+        < 2.0
+    )
     beta = float(betas.mean())
-    turned = cv2.warpAffine(img0.numpy(), cv2.getRotationMatrix2D((SIZE / 2 - 0.5, SIZE / 2 - 0.5), beta, 1.0),
-                            (SIZE, SIZE))
-    wrong = cv2.warpAffine(img0.numpy(), cv2.getRotationMatrix2D((SIZE / 2 - 0.5, SIZE / 2 - 0.5), -beta, 1.0),
-                           (SIZE, SIZE))
+    turned = cv2.warpAffine(
+        img0.numpy(), cv2.getRotationMatrix2D((SIZE / 2 - 0.5, SIZE / 2 - 0.5), beta, 1.0), (SIZE, SIZE)
+    )
+    wrong = cv2.warpAffine(
+        img0.numpy(), cv2.getRotationMatrix2D((SIZE / 2 - 0.5, SIZE / 2 - 0.5), -beta, 1.0), (SIZE, SIZE)
+    )
     centre = slice(SIZE // 2 - 20, SIZE // 2 + 20)
     err = np.abs(turned[centre, centre] - img1.numpy()[centre, centre]).mean()
     err_wrong = np.abs(wrong[centre, centre] - img1.numpy()[centre, centre]).mean()
@@ -109,7 +131,7 @@ def test_prior_angles_carried_exactly_on_a_shifted_plane():
     _, d0, a0 = rendered(scene, cam0)
     _, d1, a1 = rendered(scene, cam1)
     link = prior_link(cam1, d1, a1, cam0, d0, a0, (cells, cells))
-    previous = (torch.arange(cells * cells, dtype=torch.float32).reshape(cells, cells) * 7.0 + 300.0)
+    previous = torch.arange(cells * cells, dtype=torch.float32).reshape(cells, cells) * 7.0 + 300.0
     prior = link.prior_angles(previous)
     inner = (slice(None), slice(0, cells - 2))
     expected = torch.remainder(previous[:, 2:], 360.0)
@@ -124,9 +146,12 @@ def test_occluded_cells_get_no_prior():
     """A second, nearer wall hides part of the plane from the previous view only."""
     far = wall()
     blocker = wall(20)
-    blocker = GaussianScene.from_activated(blocker.means * torch.tensor([0.15, 0.6, 0.0]) + torch.tensor([0.9, 0.0, 1.0]),
-                                           blocker.scales * 0.3, torch.full((len(blocker),), 0.99),
-                                           torch.zeros(len(blocker), 3))
+    blocker = GaussianScene.from_activated(
+        blocker.means * torch.tensor([0.15, 0.6, 0.0]) + torch.tensor([0.9, 0.0, 1.0]),
+        blocker.scales * 0.3,
+        torch.full((len(blocker),), 0.99),
+        torch.zeros(len(blocker), 3),
+    )
     from gt2gs_blender.core.scene.gaussians import concat
 
     cam0, cam1 = camera(shift=(0.5, 0.0)), camera(shift=(-0.5, 0.0))
@@ -146,8 +171,9 @@ def test_angle_distance_wraps():
 def tiny_bank() -> TextureBank:
     """Three features: row 0 at theta 0, row 1 at 90, row 2 at 355; row 2 nearly equals row 0."""
     feats = torch.tensor([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.99, 0.14, 0.0]])
-    return TextureBank(feats, torch.zeros(3, dtype=torch.long), torch.tensor([0.0, 90.0, 355.0]), (1.0,),
-                       (0.0, 90.0, 355.0), 1, "test")
+    return TextureBank(
+        feats, torch.zeros(3, dtype=torch.long), torch.tensor([0.0, 90.0, 355.0]), (1.0,), (0.0, 90.0, 355.0), 1, "test"
+    )
 
 
 def test_matching_with_a_prior_trades_cosine_for_angle_and_wraps():
@@ -167,8 +193,9 @@ def test_matching_with_a_prior_trades_cosine_for_angle_and_wraps():
 
 
 def test_matching_respects_depth_groups():
-    bank = TextureBank(torch.eye(3), torch.tensor([0, 1, 1]), torch.tensor([0.0, 0.0, 90.0]), (1.0, 0.5),
-                       (0.0, 90.0), 1, "test")
+    bank = TextureBank(
+        torch.eye(3), torch.tensor([0, 1, 1]), torch.tensor([0.0, 0.0, 90.0]), (1.0, 0.5), (0.0, 90.0), 1, "test"
+    )
     feats = torch.tensor([[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]]).reshape(3, 1, 2)  # cells: row 0, row 2
     out = match_with_prior(feats, bank, torch.full((1, 2), math.nan), 0.0, groups=torch.tensor([[1, 0]]))
     assert out.indices.tolist() == [[1, 0]]  # each cell restricted to its group's rows
@@ -178,16 +205,18 @@ def test_distortion_folds_half_turns():
     def phi(a: float, b: float) -> float:
         m = Match(torch.zeros(1), torch.tensor([a]), torch.tensor([b]))
         return float(distortion(m)[0])
+
     assert phi(10.0, 10.0) == 0.0 and phi(0.0, 90.0) == 1.0 and phi(0.0, 180.0) == 0.0
     assert phi(350.0, 35.0) == pytest.approx(0.5)
 
 
 def test_view_order_chains_neighbours():
     angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
-    ring = [Camera.from_cam_to_world(np.eye(3), [3 * np.cos(t), 3 * np.sin(t), 0.0], 50, 50, 32, 32, 64, 64)
-            for t in angles]
+    ring = [
+        Camera.from_cam_to_world(np.eye(3), [3 * np.cos(t), 3 * np.sin(t), 0.0], 50, 50, 32, 32, 64, 64) for t in angles
+    ]
     shuffled = [ring[i] for i in (0, 5, 2, 7, 1, 4, 6, 3)]
     order = view_order(shuffled)
     positions = [(0, 5, 2, 7, 1, 4, 6, 3)[i] for i in order]
-    steps = {(b - a) % 8 for a, b in zip(positions, positions[1:])}
+    steps = {(b - a) % 8 for a, b in itertools.pairwise(positions)}
     assert order[0] == 0 and sorted(order) == list(range(8)) and steps <= {1, 7}

@@ -1,4 +1,5 @@
 """Losses against brute-force float64 computations and closed forms."""
+
 from __future__ import annotations
 
 import math
@@ -7,7 +8,14 @@ import pytest
 import torch
 
 from gt2gs_blender.core.transfer.gt2 import match_with_prior
-from gt2gs_blender.core.transfer.losses import anisotropy, content_loss, cosine_distance, nearest_features, scale_regulariser, tv_loss
+from gt2gs_blender.core.transfer.losses import (
+    anisotropy,
+    content_loss,
+    cosine_distance,
+    nearest_features,
+    scale_regulariser,
+    tv_loss,
+)
 from gt2gs_blender.core.transfer.texture_bank import TextureBank
 
 

@@ -1,4 +1,5 @@
 """LPIPS-Alex port against the real ``lpips`` package's values on fixed fern image pairs."""
+
 from __future__ import annotations
 
 import json
@@ -50,5 +51,5 @@ def test_symmetric_and_differentiable(lpips):
 def test_missing_weights_are_named(monkeypatch, tmp_path):
     monkeypatch.setenv("TORCH_HOME", str(tmp_path))
     monkeypatch.delenv(ENV_VAR, raising=False)
-    with pytest.raises(GT2GSError, match="alexnet_features.pth"):
+    with pytest.raises(GT2GSError, match=r"alexnet_features.pth"):
         load_lpips(tmp_path)

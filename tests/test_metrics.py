@@ -1,18 +1,19 @@
 """Evaluation metrics: consistency by depth warping, texture match, SSIM, FPS, memory."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.transfer import metrics
 from gt2gs_blender.core.cameras.camera import Camera
-from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.extractor import FeatureExtractor
 from gt2gs_blender.core.features.lpips import load_lpips
+from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
+from gt2gs_blender.core.features.weights import ResolvedWeights
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.features.weights import ResolvedWeights
+from gt2gs_blender.core.transfer import metrics
 
 from .conftest import SHARED
 
@@ -44,8 +45,14 @@ def wall_scene(n: int = 50) -> GaussianScene:
     spacing = float(coords[1] - coords[0])
     # little overlap, so little dependence on the per-view blending order of coplanar splats
     scales = torch.tensor([spacing * 0.5, spacing * 0.5, 1e-3]).expand(n * n, 3)
-    colors = torch.stack([0.5 + 0.4 * torch.sin(3 * means[:, 0]), 0.5 + 0.4 * torch.cos(2 * means[:, 1]),
-                          0.5 + 0.2 * torch.sin(means[:, 0] + means[:, 1])], -1)
+    colors = torch.stack(
+        [
+            0.5 + 0.4 * torch.sin(3 * means[:, 0]),
+            0.5 + 0.4 * torch.cos(2 * means[:, 1]),
+            0.5 + 0.2 * torch.sin(means[:, 0] + means[:, 1]),
+        ],
+        -1,
+    )
     return GaussianScene.from_activated(means, scales, torch.full((n * n,), 0.98), colors)
 
 
@@ -107,8 +114,9 @@ def test_evaluate_assembles_every_metric(lpips):
     out = render(scene, cameras, backend="torch")
     extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
     bank = extractor(out.colors[:1].permute(0, 3, 1, 2)).permute(0, 2, 3, 1).reshape(-1, extractor.spec.out_channels)
-    result = metrics.evaluate(out.colors, out.colors, out.depths, out.alphas, cameras, lpips=lpips,
-                              extractor=extractor, bank_features=bank)
+    result = metrics.evaluate(
+        out.colors, out.colors, out.depths, out.alphas, cameras, lpips=lpips, extractor=extractor, bank_features=bank
+    )
     assert set(result) == {"ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match"}
     assert result["ssim"] == pytest.approx(1.0, abs=1e-5)
     assert result["st_rmse"] < result["lt_rmse"] < 0.05 and result["st_lpips"] is not None
@@ -121,11 +129,12 @@ def test_texture_match_counts_only_covered_cells():
     scene, cameras = wall_scene(), sliding_cameras(2)
     out = render(scene, cameras, backend="torch")
     alphas = out.alphas.clone()
-    alphas[:, :, alphas.shape[2] // 2:] = 0.0  # pretend the right half is background
+    alphas[:, :, alphas.shape[2] // 2 :] = 0.0  # pretend the right half is background
     extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
     bank = torch.randn(50, extractor.spec.out_channels, generator=torch.Generator().manual_seed(2))
-    result = metrics.evaluate(out.colors, out.colors, out.depths, alphas, cameras[:2], extractor=extractor,
-                              bank_features=bank)
+    result = metrics.evaluate(
+        out.colors, out.colors, out.depths, alphas, cameras[:2], extractor=extractor, bank_features=bank
+    )
     feats = extractor(out.colors.permute(0, 3, 1, 2))
     half = feats.shape[-1] // 2
     rows = feats[..., :half].permute(0, 2, 3, 1).reshape(-1, feats.shape[1])

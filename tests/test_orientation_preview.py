@@ -2,6 +2,7 @@
 
 Its latency (the issue's budget: 2 s at 256 px on the CPU) is measured by bench/latency.py, not asserted here.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -9,8 +10,8 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.generate import look_at
-from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, texture_layer
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, texture_layer
 
 
 def wall(n_side: int = 60, tilt: float = 0.0) -> GaussianScene:
@@ -19,8 +20,9 @@ def wall(n_side: int = 60, tilt: float = 0.0) -> GaussianScene:
     y, x = torch.meshgrid(u, u, indexing="ij")
     means = torch.stack([x.reshape(-1), y.reshape(-1), tilt * y.reshape(-1)], dim=1)
     n = len(means)
-    return GaussianScene.from_activated(means, torch.full((n, 3), 0.03), torch.full((n,), 0.95),
-                                        torch.full((n, 3), 0.6))
+    return GaussianScene.from_activated(
+        means, torch.full((n, 3), 0.03), torch.full((n,), 0.95), torch.full((n, 3), 0.6)
+    )
 
 
 def horizontal_stripes(size: int = 128, period: int = 16) -> np.ndarray:
@@ -94,8 +96,9 @@ def test_nearer_depth_group_shows_the_texture_larger(depth_ratio, low, high):
     vertical = np.ascontiguousarray(horizontal_stripes(period=8).transpose(1, 0, 2))
     scene = wall(tilt=1.5)
     cam = look_at((0.0, 0.0, -3.0), (0.0, 0.0, 0.0), width=256, height=256, fov_deg=60.0, up=(0.0, -1.0, 0.0))
-    image = orientation_preview(scene, vertical, cam, 0.0, texture_height=128, n_groups=2,
-                                depth_ratio=depth_ratio).mean(axis=-1)
+    image = orientation_preview(
+        scene, vertical, cam, 0.0, texture_height=128, n_groups=2, depth_ratio=depth_ratio
+    ).mean(axis=-1)
     rows = np.flatnonzero((image < 250).mean(axis=1) > 0.3)  # rows the wall covers
     near, far = rows[len(rows) // 5], rows[-len(rows) // 5]  # -y (top) tilts towards the camera
     near_row, far_row = (image[r][image[r] < 250] for r in (near, far))

@@ -3,6 +3,7 @@
 Oracles are independent of the module: a real INRIA file parsed by hand with numpy, and test files
 built by a small numpy/struct writer below (``raw_ply``) with hand-written type codes.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -14,14 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from gt2gs_blender.core.scene import ply
 from gt2gs_blender.core.errors import PlyFormatError
+from gt2gs_blender.core.scene import ply
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.scene.ply_header import PlyProperty, read_ply_header
 from gt2gs_blender.core.scene.ply_write import write_ply
-from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -31,16 +33,44 @@ FORMATS = ("binary_little_endian", "binary_big_endian", "ascii")
 BINARY = FORMATS[:2]
 # Written out by hand (not imported) so that the tests check the module's table.
 TYPE_CODES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2", "int16": "i2",
-    "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 
 
 def core_names(k: int = 0) -> list[str]:
     """INRIA order of the Gaussian properties for K f_rest coefficients per channel."""
-    return ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", *(f"f_rest_{i}" for i in range(3 * k)),
-            "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    return [
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        *(f"f_rest_{i}" for i in range(3 * k)),
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
 
 
 def random_columns(props: list[tuple[str, str]], n: int, seed: int = 0) -> dict[str, np.ndarray]:
@@ -63,8 +93,12 @@ def body_bytes(props: list[tuple[str, str]], columns: dict[str, np.ndarray], fmt
     if fmt == "ascii":
         rows = []
         for i in range(n):
-            rows.append(" ".join(repr(float(columns[name][i])) if TYPE_CODES[t][0] == "f"
-                                 else str(int(columns[name][i])) for name, t in props))
+            rows.append(
+                " ".join(
+                    repr(float(columns[name][i])) if TYPE_CODES[t][0] == "f" else str(int(columns[name][i]))
+                    for name, t in props
+                )
+            )
         return "".join(row + "\n" for row in rows).encode()
     endian = "<" if fmt == "binary_little_endian" else ">"
     records = np.empty(n, np.dtype([(name, endian + TYPE_CODES[t]) for name, t in props]))
@@ -73,9 +107,17 @@ def body_bytes(props: list[tuple[str, str]], columns: dict[str, np.ndarray], fmt
     return records.tobytes()
 
 
-def raw_ply(props: list[tuple[str, str]], columns: dict[str, np.ndarray], fmt: str = "binary_little_endian", *,
-            n: int | None = None, header_lines: tuple[str, ...] = (), before: tuple[list[str], bytes] | None = None,
-            after: tuple[list[str], bytes] | None = None, newline: str = "\n") -> bytes:
+def raw_ply(
+    props: list[tuple[str, str]],
+    columns: dict[str, np.ndarray],
+    fmt: str = "binary_little_endian",
+    *,
+    n: int | None = None,
+    header_lines: tuple[str, ...] = (),
+    before: tuple[list[str], bytes] | None = None,
+    after: tuple[list[str], bytes] | None = None,
+    newline: str = "\n",
+) -> bytes:
     """A PLY file: optional extra header lines (comments), elements before/after 'vertex'."""
     count = n if n is not None else (len(next(iter(columns.values()))) if columns else 0)
     lines = ["ply", f"format {fmt} 1.0", *header_lines]
@@ -99,11 +141,16 @@ def make_scene(n: int, degree: int, *, normals: bool = False, extras: bool = Fal
         extra.update({axis: rng.standard_normal(n).astype(np.float32) for axis in ("nx", "ny", "nz")})
     if extras:
         extra["confidence"] = rng.integers(0, 256, n).astype(np.uint8)
-        extra["label"] = rng.integers(-2**31, 2**31, n).astype(np.int32)
+        extra["label"] = rng.integers(-(2**31), 2**31, n).astype(np.int32)
         extra["weight"] = rng.standard_normal(n)
     return GaussianScene(
-        means=randn(n, 3), quats=randn(n, 4), log_scales=randn(n, 3), opacity_logits=randn(n),
-        sh_dc=randn(n, 3), sh_rest=randn(n, (degree + 1) ** 2 - 1, 3), extras=extra,
+        means=randn(n, 3),
+        quats=randn(n, 4),
+        log_scales=randn(n, 3),
+        opacity_logits=randn(n),
+        sh_dc=randn(n, 3),
+        sh_rest=randn(n, (degree + 1) ** 2 - 1, 3),
+        extras=extra,
     )
 
 
@@ -120,7 +167,7 @@ def assert_same_scene(a: GaussianScene, b: GaussianScene) -> None:
 
 def header_text(path: Path) -> str:
     data = path.read_bytes()
-    return data[:data.index(b"end_header\n") + len(b"end_header\n")].decode()
+    return data[: data.index(b"end_header\n") + len(b"end_header\n")].decode()
 
 
 def sha256(path: Path) -> str:
@@ -143,8 +190,11 @@ def test_donut_matches_a_hand_parsed_reading_of_its_bytes():
     assert len(scene) == 45624 and scene.sh_degree == 0 and scene.extras == {}
     assert scene.sh_rest.shape == (45624, 0, 3)
     expected = {
-        "means": ["x", "y", "z"], "sh_dc": ["f_dc_0", "f_dc_1", "f_dc_2"], "opacity_logits": ["opacity"],
-        "log_scales": ["scale_0", "scale_1", "scale_2"], "quats": ["rot_0", "rot_1", "rot_2", "rot_3"],
+        "means": ["x", "y", "z"],
+        "sh_dc": ["f_dc_0", "f_dc_1", "f_dc_2"],
+        "opacity_logits": ["opacity"],
+        "log_scales": ["scale_0", "scale_1", "scale_2"],
+        "quats": ["rot_0", "rot_1", "rot_2", "rot_3"],
     }
     for key, names in expected.items():
         want = np.stack([oracle[name] for name in names], axis=1).astype(np.float32)
@@ -205,11 +255,31 @@ def test_rewriting_an_unchanged_scene_is_byte_exact(tmp_path, degree, fmt):
 @pytest.mark.parametrize("fmt", BINARY)
 def test_foreign_layout_is_kept_byte_for_byte(tmp_path, fmt):
     """Shuffled order, type aliases, double core values and every extra type survive unchanged."""
-    props = [("rot_3", "float32"), ("opacity", "float"), ("tag", "char"), ("x", "double"), ("y", "float"),
-             ("f_dc_2", "float"), ("f_dc_0", "float"), ("z", "float64"), ("f_dc_1", "float"),
-             ("scale_2", "float"), ("u8", "uint8"), ("scale_0", "float"), ("scale_1", "float"),
-             ("s16", "short"), ("u16", "ushort"), ("i32", "int32"), ("u32", "uint"), ("rot_0", "float"),
-             ("rot_1", "float"), ("rot_2", "float"), ("d", "double"), ("i8", "int8"), ("f", "float")]
+    props = [
+        ("rot_3", "float32"),
+        ("opacity", "float"),
+        ("tag", "char"),
+        ("x", "double"),
+        ("y", "float"),
+        ("f_dc_2", "float"),
+        ("f_dc_0", "float"),
+        ("z", "float64"),
+        ("f_dc_1", "float"),
+        ("scale_2", "float"),
+        ("u8", "uint8"),
+        ("scale_0", "float"),
+        ("scale_1", "float"),
+        ("s16", "short"),
+        ("u16", "ushort"),
+        ("i32", "int32"),
+        ("u32", "uint"),
+        ("rot_0", "float"),
+        ("rot_1", "float"),
+        ("rot_2", "float"),
+        ("d", "double"),
+        ("i8", "int8"),
+        ("f", "float"),
+    ]
     props += [(f"f_rest_{i}", "float") for i in reversed(range(9))]
     columns = random_columns(props, 6, seed=3)
     for axis in "xz":  # core values are float32 in memory: exact only for doubles that are float32 values
@@ -420,7 +490,7 @@ MALFORMED = {
     "format-no-version": (good().replace(b"binary_little_endian 1.0", b"binary_little_endian"), "format"),
     "no-format-line": (good().replace(b"format binary_little_endian 1.0\n", b""), "no 'format' line"),
     "two-format-lines": (good(header_lines=("format ascii 1.0",)), "second 'format'"),
-    "no-end-header": (good()[:good().index(b"end_header")], "end_header"),
+    "no-end-header": (good()[: good().index(b"end_header")], "end_header"),
     "header-too-long": (good(header_lines=("comment " + "x" * 70,) * 1000), "too long"),
     "non-ascii-header": (good(header_lines=("comment caf\xe9",)).replace(b"caf\xc3\xa9", b"caf\xe9"), "ASCII"),
     "no-vertex-element": (good().replace(b"element vertex", b"element points"), "element vertex"),
@@ -444,10 +514,14 @@ MALFORMED = {
     "property-before-element": (good(header_lines=("property float q",)), "before any"),
     "list-count-float": (good(before=(["element face 0", "property list float int idx"], b"")), "count type"),
     "vertex-list": (good().replace(b"property uchar label", b"property list uchar int label"), "list"),
-    "truncated-list-element": (good(before=(["element face 3", "property list uchar int idx"], b"\x01\0\0\0\0")),
-                               "truncated"),
-    "missing-required": (good(props=[p for p in GOOD_PROPS if p[0] not in ("scale_1", "rot_3")]),
-                         "missing required properties scale_1, rot_3"),
+    "truncated-list-element": (
+        good(before=(["element face 3", "property list uchar int idx"], b"\x01\0\0\0\0")),
+        "truncated",
+    ),
+    "missing-required": (
+        good(props=[p for p in GOOD_PROPS if p[0] not in ("scale_1", "rot_3")]),
+        "missing required properties scale_1, rot_3",
+    ),
     "non-float-required": (good(props=with_type("opacity", "uchar")), "float or double: opacity (uchar)"),
     "f-rest-count": (good(props=GOOD_PROPS + [(f"f_rest_{i}", "float") for i in range(10)]), "f_rest"),
     "f-rest-names": (good(props=GOOD_PROPS + [(f"f_rest_{i + 1}", "float") for i in range(9)]), "f_rest"),
@@ -536,7 +610,7 @@ def test_drop_invalid_is_silent_when_all_values_are_finite(tmp_path):
 
 
 def test_non_finite_extras_are_kept_as_they_are(tmp_path):
-    props = GOOD_PROPS + [("nx", "float")]
+    props = [*GOOD_PROPS, ("nx", "float")]
     columns = random_columns(props, 2)
     columns["nx"][0] = np.nan
     path = tmp_path / "nan-normal.ply"
@@ -547,9 +621,11 @@ def test_non_finite_extras_are_kept_as_they_are(tmp_path):
 # -- atomic writes ----------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("bad", [np.zeros((3, 2), np.float32), np.array([None] * 3, dtype=object),
-                                 np.zeros(3, np.int64), np.zeros(4, np.float32)],
-                         ids=["2d", "object", "int64", "wrong-length"])
+@pytest.mark.parametrize(
+    "bad",
+    [np.zeros((3, 2), np.float32), np.array([None] * 3, dtype=object), np.zeros(3, np.int64), np.zeros(4, np.float32)],
+    ids=["2d", "object", "int64", "wrong-length"],
+)
 def test_write_with_a_bad_extra_fails_and_keeps_the_old_file(tmp_path, bad):
     path = tmp_path / "out.ply"
     path.write_bytes(b"old")
@@ -635,7 +711,7 @@ def mutate(data: bytes, mutations: list[tuple]) -> bytes:
         if kind in ("set", "set-text") and at < len(buffer):
             buffer[at] = arg
         elif kind == "delete":
-            del buffer[at:at + arg]
+            del buffer[at : at + arg]
         elif kind == "insert":
             buffer[at:at] = arg
         elif kind == "truncate":
@@ -649,8 +725,11 @@ def fuzz_dir(tmp_path_factory):
 
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(base=st.sampled_from(sorted(FUZZ_BASES)), mutations=st.lists(MUTATION, min_size=1, max_size=4),
-       drop_invalid=st.booleans())
+@given(
+    base=st.sampled_from(sorted(FUZZ_BASES)),
+    mutations=st.lists(MUTATION, min_size=1, max_size=4),
+    drop_invalid=st.booleans(),
+)
 def test_corrupted_files_load_or_raise_ply_format_error(fuzz_dir, base, mutations, drop_invalid):
     path = fuzz_dir / "corrupt.ply"
     path.write_bytes(mutate(FUZZ_BASES[base], mutations))

@@ -1,4 +1,5 @@
 """Every rasterizer backend against the float64 dense reference, finite differences and analytic cases."""
+
 from __future__ import annotations
 
 import math
@@ -12,10 +13,9 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.generate import auto_views
-from gt2gs_blender.core.scene.ply import read_ply
-from gt2gs_blender.core.render import available_backends, rasterization, render
-from gt2gs_blender.core.render import gsplat_backend
+from gt2gs_blender.core.render import available_backends, gsplat_backend, rasterization, render
 from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
+from gt2gs_blender.core.scene.ply import read_ply
 
 from .reference import frustum_clamp, render_reference, support_radius
 
@@ -62,8 +62,9 @@ def compare_to_reference(gaussians, viewmats, ks, width, height, backend, sh_deg
     out = rasterization(*gaussians, viewmats, ks, width, height, sh_degree=sh_degree, backend=backend)
     assert out.backend == backend
     for b in range(viewmats.shape[0]):
-        ref = render_reference(*(t.numpy() for t in gaussians), viewmats[b].numpy(), ks[b].numpy(), width, height,
-                               sh_degree=sh_degree)
+        ref = render_reference(
+            *(t.numpy() for t in gaussians), viewmats[b].numpy(), ks[b].numpy(), width, height, sh_degree=sh_degree
+        )
         ok = ~ref.ambiguous
         assert ok.mean() > 0.97, "too many threshold-ambiguous pixels for a meaningful comparison"
         color = out.colors[b].double().numpy()
@@ -99,9 +100,9 @@ def test_matches_reference_extreme_gaussians(backend):
     """Tiny, huge and 1000:1 anisotropic Gaussians, and ones near, on and behind the near plane."""
     viewmats, ks = two_cameras(40, 32)
     means, quats, scales, opacities, colors = random_gaussians(60, None, seed=3)
-    scales[0:10] = 1e-5                                   # far below a pixel: the dilation dominates
-    scales[10:14] = 3.0                                   # larger than the view
-    scales[14:24, 0] = scales[14:24, 1] * 1000.0          # needles
+    scales[0:10] = 1e-5  # far below a pixel: the dilation dominates
+    scales[10:14] = 3.0  # larger than the view
+    scales[14:24, 0] = scales[14:24, 1] * 1000.0  # needles
     cam_center = -viewmats[0, :3, :3].T @ viewmats[0, :3, 3]
     fwd = viewmats[0, 2, :3]
     for i, z in enumerate([0.02, 0.0102, 0.0098, -0.5, 0.3]):  # near plane is 0.01
@@ -119,10 +120,13 @@ def test_reference_frustum_clamp_is_the_published_rule():
     assert np.allclose(frustum_clamp(10.0, -10.0, centred, width, height), [1.3 * tan_x, -1.3 * tan_y])
     assert np.allclose(frustum_clamp(0.2, -0.3, centred, width, height), [0.2, -0.3])
     shifted = np.array([[fx, 0, 16.0], [0, fy, 12.0], [0, 0, 1]])
-    assert np.allclose(frustum_clamp(10.0, 10.0, shifted, width, height),
-                       [(width - 16.0) / fx + 0.3 * tan_x, (height - 12.0) / fy + 0.3 * tan_y])
-    assert np.allclose(frustum_clamp(-10.0, -10.0, shifted, width, height),
-                       [-(16.0 / fx + 0.3 * tan_x), -(12.0 / fy + 0.3 * tan_y)])
+    assert np.allclose(
+        frustum_clamp(10.0, 10.0, shifted, width, height),
+        [(width - 16.0) / fx + 0.3 * tan_x, (height - 12.0) / fy + 0.3 * tan_y],
+    )
+    assert np.allclose(
+        frustum_clamp(-10.0, -10.0, shifted, width, height), [-(16.0 / fx + 0.3 * tan_x), -(12.0 / fy + 0.3 * tan_y)]
+    )
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -134,8 +138,18 @@ def test_single_gaussian_footprint_is_analytic(backend):
     viewmat = torch.eye(4)[None]
     k = torch.tensor([[[focal, 0, 24.0], [0, focal, 24.0], [0, 0, 1]]])
     means = torch.tensor([[0.0, 0.0, z]])
-    out = rasterization(means, torch.tensor([[1.0, 0, 0, 0]]), torch.full((1, 3), s3), torch.tensor([o]),
-                        torch.ones(1, 3), viewmat, k, width, height, backend=backend)
+    out = rasterization(
+        means,
+        torch.tensor([[1.0, 0, 0, 0]]),
+        torch.full((1, 3), s3),
+        torch.tensor([o]),
+        torch.ones(1, 3),
+        viewmat,
+        k,
+        width,
+        height,
+        backend=backend,
+    )
     sigma2 = (focal * s3 / z) ** 2 + 0.3
     ys, xs = np.mgrid[0:height, 0:width] + 0.5
     r2 = (xs - 24.0) ** 2 + (ys - 24.0) ** 2
@@ -156,8 +170,11 @@ def tiny_scene_f64(sh_degree):
     scales = torch.rand(n, 3, generator=g, dtype=torch.float64) * 0.1 + 0.05
     opacities = torch.rand(n, generator=g, dtype=torch.float64) * 0.5 + 0.3
     k = 1 if sh_degree is None else (sh_degree + 1) ** 2
-    colors = torch.rand(n, 3, generator=g, dtype=torch.float64) if sh_degree is None else \
-        torch.randn(n, k, 3, generator=g, dtype=torch.float64) * 0.3
+    colors = (
+        torch.rand(n, 3, generator=g, dtype=torch.float64)
+        if sh_degree is None
+        else torch.randn(n, k, 3, generator=g, dtype=torch.float64) * 0.3
+    )
     viewmats, ks = two_cameras(14, 12)
     ks = ks.double()
     ks[:, :2] *= 0.35
@@ -172,8 +189,11 @@ def test_gradcheck_all_gaussian_parameters(backend, sh_degree):
 
     def f(*p):
         out = rasterization(*p, viewmats, ks, 14, 12, sh_degree=sh_degree, backend=backend)
-        return (out.colors * weights[..., :3]).sum() + (out.depths * weights[..., 3]).sum() \
+        return (
+            (out.colors * weights[..., :3]).sum()
+            + (out.depths * weights[..., 3]).sum()
             + (out.alphas * weights[..., 4]).sum()
+        )
 
     inputs = [p.clone().requires_grad_(True) for p in params]
     assert torch.autograd.gradcheck(f, inputs, eps=1e-6, atol=1e-5, rtol=1e-4)
@@ -276,8 +296,9 @@ def test_gsplat_matches_reference_on_cuda():
     viewmats, ks = two_cameras()
     out = rasterization(*gaussians, viewmats.cuda(), ks.cuda(), 61, 47, sh_degree=3, backend="gsplat")
     for b in range(2):
-        ref = render_reference(*(t.cpu().numpy() for t in gaussians), viewmats[b].numpy(), ks[b].numpy(), 61, 47,
-                               sh_degree=3)
+        ref = render_reference(
+            *(t.cpu().numpy() for t in gaussians), viewmats[b].numpy(), ks[b].numpy(), 61, 47, sh_degree=3
+        )
         # gsplat cuts footprints at 3 sigma, not at alpha = 1/255: compare away from faint rims
         assert np.median(np.abs(out.colors[b].double().cpu().numpy() - ref.color)) < 1e-4
 

@@ -1,4 +1,5 @@
 """GaussianScene: activations, structure operations and their bookkeeping of extra PLY properties."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -8,8 +9,9 @@ from gt2gs_blender.core.scene.gaussians import SH_C0, GaussianScene, concat
 
 
 def scene_with_extras(n: int = 5, degree: int = 2) -> GaussianScene:
-    scene = GaussianScene.from_activated(torch.rand(n, 3), torch.full((n, 3), 0.1), torch.full((n,), 0.5),
-                                         torch.rand(n, 3), sh_degree=degree)
+    scene = GaussianScene.from_activated(
+        torch.rand(n, 3), torch.full((n, 3), 0.1), torch.full((n,), 0.5), torch.rand(n, 3), sh_degree=degree
+    )
     scene.extras = {"nx": np.arange(n, dtype=np.float32), "label": np.arange(n, dtype=np.int32) * 10}
     return scene
 
@@ -25,8 +27,9 @@ def test_subset_keeps_extras_aligned_for_every_index_kind():
 
 def test_activations_and_from_activated_round_trip():
     colors = torch.tensor([[0.2, 0.5, 0.9]])
-    scene = GaussianScene.from_activated(torch.zeros(1, 3), torch.tensor([[0.1, 0.2, 0.3]]), torch.tensor([0.7]),
-                                         colors)
+    scene = GaussianScene.from_activated(
+        torch.zeros(1, 3), torch.tensor([[0.1, 0.2, 0.3]]), torch.tensor([0.7]), colors
+    )
     assert torch.allclose(scene.scales, torch.tensor([[0.1, 0.2, 0.3]]))
     assert torch.allclose(scene.opacities, torch.tensor([0.7]))
     assert torch.allclose(scene.base_colors, colors) and torch.allclose(0.5 + SH_C0 * scene.sh_dc, colors)

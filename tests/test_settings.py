@@ -8,7 +8,8 @@ from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.app.cli.options import config_from_args, flag
 from gt2gs_blender.core.features.weights import PREFERENCES
 from gt2gs_blender.core.render import BACKENDS
-from gt2gs_blender.core.transfer.config import PARTS, PRESETS, SETTINGS, TransferConfig, user_settings
+from gt2gs_blender.core.transfer.config import PARTS, SETTINGS, TransferConfig, user_settings
+from gt2gs_blender.core.transfer.presets import PRESETS
 
 
 def transfer_help(capsys) -> str:
@@ -45,15 +46,21 @@ def test_choices_are_the_engines_own():
     assert SETTINGS["features"].choices == PREFERENCES
 
 
-@pytest.mark.parametrize("argv, expected", [
-    ((), {}),
-    (("--steps", "12", "--no-gpb", "--angle", "30", "--background", "0,0.5,1"),
-     {"stylise_steps": 12, "gpb": False, "angle": 30.0, "background": (0.0, 0.5, 1.0)}),
-    (("--no-plateau-stop", "--full-matching", "--stylise-geometry", "--lambda-prior", "0.01"),
-     {"plateau_window": 0, "match_channels": 0, "stylise_geometry": True, "lambda_prior": 0.01}),
-    (("--preset", "preview", "--weights", "w.pth", "--threads", "2"),
-     {"weights_path": "w.pth", "threads": 2}),
-])
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        ((), {}),
+        (
+            ("--steps", "12", "--no-gpb", "--angle", "30", "--background", "0,0.5,1"),
+            {"stylise_steps": 12, "gpb": False, "angle": 30.0, "background": (0.0, 0.5, 1.0)},
+        ),
+        (
+            ("--no-plateau-stop", "--full-matching", "--stylise-geometry", "--lambda-prior", "0.01"),
+            {"plateau_window": 0, "match_channels": 0, "stylise_geometry": True, "lambda_prior": 0.01},
+        ),
+        (("--preset", "preview", "--weights", "w.pth", "--threads", "2"), {"weights_path": "w.pth", "threads": 2}),
+    ],
+)
 def test_cli_options_become_the_config(argv, expected):
     parser = cli.build_parser()
     args = parser.parse_args(["transfer", "s.ply", "t.jpg", "-o", "o.ply", *argv])
@@ -61,8 +68,9 @@ def test_cli_options_become_the_config(argv, expected):
 
 
 def test_an_out_of_range_setting_is_one_user_error(capsys, tmp_path):
-    code = cli.main(["transfer", str(tmp_path / "s.ply"), str(tmp_path / "t.jpg"), "-o", str(tmp_path / "o.ply"),
-                     "--device", "tpu"])
+    code = cli.main(
+        ["transfer", str(tmp_path / "s.ply"), str(tmp_path / "t.jpg"), "-o", str(tmp_path / "o.ply"), "--device", "tpu"]
+    )
     assert code == 2 and "invalid choice" in capsys.readouterr().err
     with pytest.raises(ValueError, match="features must be one of"):
         TransferConfig(features="alexnet")

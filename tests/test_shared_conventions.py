@@ -4,6 +4,7 @@
 Oracles: rotations are checked against q v q* with a hand-written Hamilton product; the torch twin
 ``quats_to_rotmats`` must agree; the bake is checked against its own parts kept as they were.
 """
+
 from __future__ import annotations
 
 import re
@@ -57,8 +58,22 @@ def test_degenerate_zero_quaternion_is_the_identity():
 
 def test_inria_names_and_sh_layout():
     assert inria.SH_C0 == 0.28209479177387814
-    assert inria.REQUIRED == ("x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1",
-                              "scale_2", "rot_0", "rot_1", "rot_2", "rot_3")
+    assert inria.REQUIRED == (
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    )
     names = inria.core_property_names(3)
     assert names[6:15] == [f"f_rest_{i}" for i in range(9)] and names[15] == "opacity"
     assert [inria.rest_per_channel(f"f_rest_{i}" for i in range(n)) for n in (0, 9, 24, 45)] == [0, 3, 8, 15]
@@ -73,8 +88,10 @@ def test_inria_names_and_sh_layout():
 def test_conventions_are_written_once_in_the_package(literal):
     """SH_C0 lives in core/scene/inria.py; the quaternion formula in core/rotations.py (numpy) and
     core/scene/gaussians.py (its torch twin for the engine) only."""
-    homes = {"0.28209479177387814": {"core/scene/inria.py"},
-             "1 - 2 * (y * y + z * z)": {"core/rotations.py", "core/scene/gaussians.py"}}[literal]
+    homes = {
+        "0.28209479177387814": {"core/scene/inria.py"},
+        "1 - 2 * (y * y + z * z)": {"core/rotations.py", "core/scene/gaussians.py"},
+    }[literal]
     found = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if literal in p.read_text(encoding="utf-8")}
     assert found == homes
 
@@ -97,16 +114,25 @@ def splat_arrays(n: int = 40, k: int = 8, seed: int = 0) -> SplatArrays:
     rng = np.random.default_rng(seed)
     normals = rng.normal(size=(n, 3))
     return SplatArrays(
-        means=rng.normal(size=(n, 3)).astype(np.float32), quats=rng.normal(size=(n, 4)).astype(np.float32),
-        log_scales=rng.normal(size=(n, 3)).astype(np.float32), opacity_logits=rng.normal(size=n).astype(np.float32),
-        sh_dc=rng.normal(size=(n, 3)).astype(np.float32), sh_rest=rng.normal(size=(n, k, 3)).astype(np.float32),
-        extras={"nx": normals[:, 0].astype(np.float32), "label": np.arange(n, dtype=np.uint8),
-                "ny": normals[:, 1], "nz": normals[:, 2].astype(np.float32)},
-        ply_layout=(("x", "float"),))
+        means=rng.normal(size=(n, 3)).astype(np.float32),
+        quats=rng.normal(size=(n, 4)).astype(np.float32),
+        log_scales=rng.normal(size=(n, 3)).astype(np.float32),
+        opacity_logits=rng.normal(size=n).astype(np.float32),
+        sh_dc=rng.normal(size=(n, 3)).astype(np.float32),
+        sh_rest=rng.normal(size=(n, k, 3)).astype(np.float32),
+        extras={
+            "nx": normals[:, 0].astype(np.float32),
+            "label": np.arange(n, dtype=np.uint8),
+            "ny": normals[:, 1],
+            "nz": normals[:, 2].astype(np.float32),
+        },
+        ply_layout=(("x", "float"),),
+    )
 
 
-@pytest.mark.parametrize("linear", [np.diag([2.0, 2.0, 2.0]) @ np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]]),
-                                    np.diag([1.0, 3.0, -0.5])])
+@pytest.mark.parametrize(
+    "linear", [np.diag([2.0, 2.0, 2.0]) @ np.array([[0, -1, 0], [1, 0, 0], [0, 0, 1.0]]), np.diag([1.0, 3.0, -0.5])]
+)
 def test_bake_works_on_splat_arrays_and_leaves_the_input_alone(linear):
     scene = splat_arrays()
     before = {key: value.copy() for key, value in scene.tensors().items()}
@@ -143,6 +169,5 @@ def test_the_shared_modules_and_the_bake_need_no_torch():
         "baked, notes = transform.bake(scene, np.diag([1.0, 2.0, 3.0, 1.0]))\n"
         "assert np.isfinite(baked.quats).all() and notes\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                          cwd=PACKAGE.parent)
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=PACKAGE.parent)
     assert proc.returncode == 0, proc.stderr[-2000:]

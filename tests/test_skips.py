@@ -1,5 +1,6 @@
 """The skips of the speed work (module ``skips`` and their wiring): each one does what it says on
 inputs whose answer is known."""
+
 from __future__ import annotations
 
 import math
@@ -11,14 +12,21 @@ import torch
 import torch.nn.functional as F
 
 from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.transfer.bank import CACHE_ENV, bank_angle_count, cache_dir
 from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.content import clear_caches, content_and_hidden
 from gt2gs_blender.core.transfer.gt2 import match_with_prior
-from gt2gs_blender.core.transfer.skips import Plateau, angles_for, near_duplicates, redundant_views, texture_anisotropy, used_sh_degree
-from gt2gs_blender.core.transfer.texture_bank import TextureBank, build_texture_bank, compact_bank
-from gt2gs_blender.core.transfer.bank import CACHE_ENV, cache_dir, bank_angle_count
-from gt2gs_blender.core.transfer.content import content_and_hidden, clear_caches
-from gt2gs_blender.core.transfer.views import render_views
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.skips import (
+    Plateau,
+    angles_for,
+    near_duplicates,
+    redundant_views,
+    texture_anisotropy,
+    used_sh_degree,
+)
+from gt2gs_blender.core.transfer.texture_bank import TextureBank, build_texture_bank, compact_bank
+from gt2gs_blender.core.transfer.views import render_views
 
 from .test_transfer import blob_scene, stripes, tiny
 
@@ -59,8 +67,16 @@ def test_adaptive_angles_only_when_asked() -> None:
 
 
 def test_angle_offset_puts_the_start_angle_on_the_grid() -> None:
-    bank = build_texture_bank(stripes(64), lambda x: F.avg_pool2d(x, 4), extractor_id="pool", n_scales=1,
-                              n_angles=4, texture_height=64, cells=2, angle_offset=10.0)
+    bank = build_texture_bank(
+        stripes(64),
+        lambda x: F.avg_pool2d(x, 4),
+        extractor_id="pool",
+        n_scales=1,
+        n_angles=4,
+        texture_height=64,
+        cells=2,
+        angle_offset=10.0,
+    )
     assert bank.angles == (10.0, 100.0, 190.0, 280.0)
     assert set(bank.theta.tolist()) == set(bank.angles)
 
@@ -101,8 +117,15 @@ def test_pca_matching_agrees_with_full_matching_for_well_separated_features() ->
     basis = torch.linalg.qr(torch.randn(channels, rank, generator=g)).Q
     features = F.normalize(torch.randn(n_angles * per_angle, rank, generator=g), dim=1) @ basis.T
     theta = (torch.arange(n_angles) * 60.0).repeat_interleave(per_angle)
-    bank = TextureBank(features, torch.zeros(len(features), dtype=torch.long), theta, (1.0,),
-                       tuple(float(a) for a in range(0, 360, 60)), 2, "t")
+    bank = TextureBank(
+        features,
+        torch.zeros(len(features), dtype=torch.long),
+        theta,
+        (1.0,),
+        tuple(float(a) for a in range(0, 360, 60)),
+        2,
+        "t",
+    )
     pick = torch.randint(len(features), (7 * 9,), generator=g)
     feats = (features[pick] + 0.02 * torch.randn(len(pick), channels, generator=g)).T.reshape(channels, 7, 9)
     prior = torch.full((7, 9), math.nan)
@@ -118,7 +141,7 @@ def test_pca_matching_agrees_with_full_matching_for_well_separated_features() ->
 def test_a_duplicated_camera_is_dropped_and_distinct_ones_are_kept() -> None:
     scene = blob_scene()
     cameras = auto_views(scene, 4, width=48, height=48)  # 90 degrees apart: each sees new sides
-    cameras = cameras + [cameras[1]]
+    cameras = [*cameras, cameras[1]]
     views = render_views(scene, cameras, torch.ones(3), "auto")
     dropped = redundant_views(cameras, views.depths, views.alphas, [0, 1, 4, 2, 3])
     assert dropped == [4]
@@ -128,8 +151,9 @@ def test_a_duplicated_camera_is_dropped_and_distinct_ones_are_kept() -> None:
 def test_dropping_views_in_a_transfer_reports_the_dropped_view(tmp_path) -> None:
     scene = blob_scene()
     cameras = auto_views(scene, 3, width=48, height=48)
-    result = transfer(scene, stripes(), cameras + [cameras[0]], tiny(cache_dir=str(tmp_path), drop_views=True,
-                                                                     evaluate=True))
+    result = transfer(
+        scene, stripes(), [*cameras, cameras[0]], tiny(cache_dir=str(tmp_path), drop_views=True, evaluate=True)
+    )
     assert result.report["skips"]["dropped_views"] == [3]
     assert result.report["metrics"]["ssim"] > 0  # evaluated on every view, the dropped one too
 
@@ -172,7 +196,14 @@ def test_bank_cache_hit_is_identical_and_a_changed_texture_misses(tmp_path) -> N
         calls["n"] += 1
         return F.avg_pool2d(x, 4)
 
-    settings = {"extractor_id": "pool", "n_scales": 2, "n_angles": 4, "texture_height": 64, "cells": 2, "cache_dir": tmp_path}
+    settings = {
+        "extractor_id": "pool",
+        "n_scales": 2,
+        "n_angles": 4,
+        "texture_height": 64,
+        "cells": 2,
+        "cache_dir": tmp_path,
+    }
     first = build_texture_bank(stripes(64), extractor, **settings)
     built = calls["n"]
     again = build_texture_bank(stripes(64), extractor, **settings)
@@ -204,13 +235,20 @@ def test_content_cache_reuses_renders_for_the_same_scene_and_views_only() -> Non
     moved = scene.clone()
     moved.means[0, 0] += 0.01
     assert content_and_hidden(moved, cameras, torch.ones(3), config)[0] is not first[0]
-    assert content_and_hidden(scene, cameras, torch.ones(3), TransferConfig(reuse_content=False))[0] \
-        is not first[0]
+    assert content_and_hidden(scene, cameras, torch.ones(3), TransferConfig(reuse_content=False))[0] is not first[0]
     clear_caches()
 
 
-@pytest.mark.parametrize("bad", [{"dedup_threshold": 1.5}, {"match_channels": -1}, {"plateau_window": -2},
-                                 {"feature_scale": 0.0}, {"min_new_coverage": 2.0}])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        {"dedup_threshold": 1.5},
+        {"match_channels": -1},
+        {"plateau_window": -2},
+        {"feature_scale": 0.0},
+        {"min_new_coverage": 2.0},
+    ],
+)
 def test_bad_skip_settings_are_refused(bad) -> None:
     with pytest.raises(ValueError):
         TransferConfig(**bad)

@@ -1,5 +1,6 @@
 """The speed work's behaviour: matching per angle and on covered cells gives the same targets, and
 hidden Gaussians are skipped (left out of rendering and optimisation, returned unchanged)."""
+
 from __future__ import annotations
 
 import math
@@ -10,20 +11,21 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from gt2gs_blender.core.transfer import stylise as stylise_module
 from gt2gs_blender.core.cameras.generate import auto_views
-from gt2gs_blender.core.transfer.gt2 import angle_distance, match_with_prior
 from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.transfer.texture_bank import TextureBank
+from gt2gs_blender.core.transfer import stylise as stylise_module
 from gt2gs_blender.core.transfer.content import contributions, hidden_gaussians
-from gt2gs_blender.core.transfer.views import fit_cameras
+from gt2gs_blender.core.transfer.gt2 import angle_distance, match_with_prior
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.texture_bank import TextureBank
+from gt2gs_blender.core.transfer.views import fit_cameras
 
 from .test_transfer import blob_scene, stripes, tiny
 
 
-def brute_force_match(feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor, lambda_prior: float,
-                      groups: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def brute_force_match(
+    feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor, lambda_prior: float, groups: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
     """Reference: every cell against every row of its group, the full cost matrix at once."""
     c = feats.shape[0]
     queries = F.normalize(feats.reshape(c, -1).T, dim=1)
@@ -46,8 +48,9 @@ def test_per_angle_matching_equals_costing_every_row(shuffled: bool, lambda_prio
     k = torch.arange(n_groups).repeat_interleave(n_angles * per_angle)
     theta = (torch.arange(n_angles) * 30.0).repeat_interleave(per_angle).repeat(n_groups)
     order = torch.randperm(m, generator=g) if shuffled else torch.arange(m)
-    bank = TextureBank(features[order], k[order], theta[order], (1.0, 0.8, 0.6),
-                       tuple(float(a) for a in range(0, 360, 30)), 4, "test")
+    bank = TextureBank(
+        features[order], k[order], theta[order], (1.0, 0.8, 0.6), tuple(float(a) for a in range(0, 360, 30)), 4, "test"
+    )
     feats = torch.randn(channels, 9, 11, generator=g) + 0.2
     prior = torch.rand(9, 11, generator=g) * 360.0
     prior[0] = math.nan
@@ -60,8 +63,15 @@ def test_per_angle_matching_equals_costing_every_row(shuffled: bool, lambda_prio
 
 def test_matching_only_the_asked_cells_gives_them_the_same_targets() -> None:
     g = torch.Generator().manual_seed(2)
-    bank = TextureBank(torch.randn(48, 8, generator=g), torch.zeros(48, dtype=torch.long),
-                       (torch.arange(4) * 90.0).repeat_interleave(12), (1.0,), (0.0, 90.0, 180.0, 270.0), 2, "t")
+    bank = TextureBank(
+        torch.randn(48, 8, generator=g),
+        torch.zeros(48, dtype=torch.long),
+        (torch.arange(4) * 90.0).repeat_interleave(12),
+        (1.0,),
+        (0.0, 90.0, 180.0, 270.0),
+        2,
+        "t",
+    )
     feats = torch.randn(8, 5, 6, generator=g)
     prior = torch.rand(5, 6, generator=g) * 360.0
     cells = torch.rand(5, 6, generator=g) > 0.5

@@ -1,4 +1,5 @@
 """SSIM against the reference libraries' values (pytorch_msssim, skimage) and its gradient."""
+
 from __future__ import annotations
 
 import json

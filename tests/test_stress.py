@@ -7,6 +7,7 @@ gradients for every raw parameter, and (3) agreement with the float64 dense refe
 threshold. Invisible degenerate Gaussians must moreover leave the other Gaussians' render and
 gradients exactly as they are without them.
 """
+
 from __future__ import annotations
 
 import logging
@@ -18,11 +19,11 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.camera import Camera
-from gt2gs_blender.core.train.densify import DensifyConfig, DensityStats, densify_and_prune
 from gt2gs_blender.core.fit.trainer import FitConfig, Trainer
-from gt2gs_blender.core.train.optim import BACKOFF_AFTER, PARAM_NAMES, GaussianAdam, StepGuard
 from gt2gs_blender.core.render import available_backends, render
 from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.train.densify import DensifyConfig, DensityStats, densify_and_prune
+from gt2gs_blender.core.train.optim import BACKOFF_AFTER, PARAM_NAMES, GaussianAdam, StepGuard
 
 from .reference import render_reference
 
@@ -38,14 +39,20 @@ def camera(z: float = 0.0, yaw: float = 0.0, width: int = WIDTH, height: int = H
     """A camera at (0, 0, z) looking along +z (turned by ``yaw`` about y), OpenCV axes."""
     c, s = math.cos(yaw), math.sin(yaw)
     rot_c2w = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    return Camera.from_cam_to_world(rot_c2w, (0.0, 0.0, z), FOCAL, FOCAL * 1.1, width / 2.0 + 0.3,
-                                    height / 2.0 - 0.2, width, height)
+    return Camera.from_cam_to_world(
+        rot_c2w, (0.0, 0.0, z), FOCAL, FOCAL * 1.1, width / 2.0 + 0.3, height / 2.0 - 0.2, width, height
+    )
 
 
 def raw_scene(rows: list[dict], sh_degree: int = 0) -> GaussianScene:
     """A scene of raw parameters, one dict per Gaussian (missing keys: a small opaque red-ish blob)."""
-    default = {"mean": (0.0, 0.0, 2.0), "quat": (1.0, 0.0, 0.0, 0.0), "log_scale": (-2.5, -2.5, -2.5),
-               "logit": 1.5, "dc": (0.8, -0.5, 0.1)}
+    default = {
+        "mean": (0.0, 0.0, 2.0),
+        "quat": (1.0, 0.0, 0.0, 0.0),
+        "log_scale": (-2.5, -2.5, -2.5),
+        "logit": 1.5,
+        "dc": (0.8, -0.5, 0.1),
+    }
     rows = [{**default, **row} for row in rows]
 
     def column(key: str) -> torch.Tensor:
@@ -54,15 +61,23 @@ def raw_scene(rows: list[dict], sh_degree: int = 0) -> GaussianScene:
     n = len(rows)
     k = (sh_degree + 1) ** 2 - 1
     rest = torch.stack([0.3 * torch.randn(k, 3, generator=torch.Generator().manual_seed(i)) for i in range(n)])
-    return GaussianScene(means=column("mean"), quats=column("quat"), log_scales=column("log_scale"),
-                         opacity_logits=column("logit").reshape(n), sh_dc=column("dc"), sh_rest=rest)
+    return GaussianScene(
+        means=column("mean"),
+        quats=column("quat"),
+        log_scales=column("log_scale"),
+        opacity_logits=column("logit").reshape(n),
+        sh_dc=column("dc"),
+        sh_rest=rest,
+    )
 
 
 def backgrounds() -> list[dict]:
     """Three ordinary Gaussians in front of the camera, beside which each degenerate one is put."""
-    return [{"mean": (0.3, -0.2, 2.5), "dc": (0.1, 0.9, -0.3)},
-            {"mean": (-0.4, 0.1, 3.0), "log_scale": (-2.0, -3.0, -2.2), "quat": (0.7, 0.1, -0.5, 0.2)},
-            {"mean": (0.0, 0.3, 1.5), "logit": -0.5, "dc": (-0.6, 0.2, 0.9)}]
+    return [
+        {"mean": (0.3, -0.2, 2.5), "dc": (0.1, 0.9, -0.3)},
+        {"mean": (-0.4, 0.1, 3.0), "log_scale": (-2.0, -3.0, -2.2), "quat": (0.7, 0.1, -0.5, 0.2)},
+        {"mean": (0.0, 0.3, 1.5), "logit": -0.5, "dc": (-0.6, 0.2, 0.9)},
+    ]
 
 
 def render_with_grads(scene: GaussianScene, cameras: list[Camera], backend: str):
@@ -92,8 +107,9 @@ def assert_matches_reference(scene: GaussianScene, cameras: list[Camera], out, m
         args = [t.double().numpy() for t in (scene.means, scene.quats, scene.scales, scene.opacities)]
     degree = scene.sh_degree
     for b, cam in enumerate(cameras):
-        ref = render_reference(*args, scene.sh.detach().double().numpy(), cam.world_to_cam, cam.K, cam.width,
-                               cam.height, sh_degree=degree)
+        ref = render_reference(
+            *args, scene.sh.detach().double().numpy(), cam.world_to_cam, cam.K, cam.width, cam.height, sh_degree=degree
+        )
         ok = ~ref.ambiguous
         assert ok.mean() >= min_defined, "too many threshold-ambiguous pixels for a meaningful comparison"
         color = ref.color + (1.0 - ref.alpha[..., None]) * np.array([0.2, 0.4, 0.6])
@@ -115,8 +131,11 @@ DEGENERATE = {
     "aniso-1e6-needle-along-view": {"log_scale": (-1.0 + NEEDLE, -1.0 + NEEDLE, -1.0)},
     "aniso-1e6-needle-in-screen-45deg": {"log_scale": (-1.0, -1.0 + NEEDLE, -1.0 + NEEDLE), "quat": (C8, 0.0, 0.0, S8)},
     "aniso-1e6-disk-edge-on": {"log_scale": (-1.5, -1.5, -1.5 + NEEDLE), "quat": (SQRT_HALF, SQRT_HALF, 0.0, 0.0)},
-    "float32-cancellation-needle": {"log_scale": (6.3, 6.3 + NEEDLE, 6.3 + NEEDLE), "quat": (C8, 0.0, 0.0, S8),
-                                    "logit": -1.0},
+    "float32-cancellation-needle": {
+        "log_scale": (6.3, 6.3 + NEEDLE, 6.3 + NEEDLE),
+        "quat": (C8, 0.0, 0.0, S8),
+        "logit": -1.0,
+    },
     "aniso-1e6-disk-tilted": {"log_scale": (-1.2, -1.2 + NEEDLE, -1.2), "quat": (0.9, 0.3, -0.2, 0.25)},
     # rotations
     "zero-quaternion": {"quat": (0.0, 0.0, 0.0, 0.0), "log_scale": (-1.5, -3.0, -2.5)},
@@ -137,8 +156,14 @@ DEGENERATE = {
     "far-beside-the-view": {"mean": (1e37, 0.0, 1.0)},
     "very-far-ahead": {"mean": (0.0, 0.0, 1e6), "log_scale": (8.0, 8.0, 8.0)},
 }
-INVISIBLE = {"opacity-logit-minus-50", "on-the-near-plane", "just-behind-near", "at-the-camera-centre",
-             "behind-the-camera", "far-beside-the-view"}
+INVISIBLE = {
+    "opacity-logit-minus-50",
+    "on-the-near-plane",
+    "just-behind-near",
+    "at-the-camera-centre",
+    "behind-the-camera",
+    "far-beside-the-view",
+}
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -170,8 +195,9 @@ def test_cancellation_case_is_ill_conditioned_in_float32():
     scene = raw_scene([DEGENERATE["float32-cancellation-needle"]])
     cam = camera()
     x, y, z = scene.means[0].double().tolist()
-    jac = torch.tensor([[cam.fx / z, 0.0, -cam.fx * x / z**2], [0.0, cam.fy / z, -cam.fy * y / z**2]],
-                       dtype=torch.float64) @ torch.tensor(cam.world_to_cam[:3, :3])
+    jac = torch.tensor(
+        [[cam.fx / z, 0.0, -cam.fx * x / z**2], [0.0, cam.fy / z, -cam.fy * y / z**2]], dtype=torch.float64
+    ) @ torch.tensor(cam.world_to_cam[:3, :3])
     dets = {}
     for dtype in (torch.float32, torch.float64):
         m = quats_to_rotmats(scene.quats.to(dtype))[0] * scene.scales.to(dtype)[0]
@@ -186,11 +212,16 @@ def test_cancellation_case_is_ill_conditioned_in_float32():
 def test_camera_inside_a_cloud_with_view_dependent_colour(backend):
     g = torch.Generator().manual_seed(3)
     n = 250
-    rows = [{"mean": tuple(((torch.rand(3, generator=g) * 2 - 1) * 2.0).tolist()),
-             "quat": tuple(torch.randn(4, generator=g).tolist()),
-             "log_scale": tuple((-2.5 + 0.7 * torch.randn(3, generator=g)).tolist()),
-             "logit": float(torch.randn((), generator=g)) * 2, "dc": tuple(torch.randn(3, generator=g).tolist())}
-            for _ in range(n)]
+    rows = [
+        {
+            "mean": tuple(((torch.rand(3, generator=g) * 2 - 1) * 2.0).tolist()),
+            "quat": tuple(torch.randn(4, generator=g).tolist()),
+            "log_scale": tuple((-2.5 + 0.7 * torch.randn(3, generator=g)).tolist()),
+            "logit": float(torch.randn((), generator=g)) * 2,
+            "dc": tuple(torch.randn(3, generator=g).tolist()),
+        }
+        for _ in range(n)
+    ]
     scene = raw_scene(rows, sh_degree=3)
     cameras = [camera(), camera(yaw=2.5)]
     out, grads = render_with_grads(scene, cameras, backend)
@@ -210,9 +241,18 @@ EMPTY = {
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("case", sorted(EMPTY))
 def test_empty_views_show_the_background_with_zero_gradients(backend, case):
-    scene = raw_scene(EMPTY[case], sh_degree=1) if EMPTY[case] else GaussianScene(
-        means=torch.zeros(0, 3), quats=torch.zeros(0, 4), log_scales=torch.zeros(0, 3),
-        opacity_logits=torch.zeros(0), sh_dc=torch.zeros(0, 3), sh_rest=torch.zeros(0, 3, 3))
+    scene = (
+        raw_scene(EMPTY[case], sh_degree=1)
+        if EMPTY[case]
+        else GaussianScene(
+            means=torch.zeros(0, 3),
+            quats=torch.zeros(0, 4),
+            log_scales=torch.zeros(0, 3),
+            opacity_logits=torch.zeros(0),
+            sh_dc=torch.zeros(0, 3),
+            sh_rest=torch.zeros(0, 3, 3),
+        )
+    )
     out, grads = render_with_grads(scene, [camera(), camera(yaw=0.5)], backend)
     assert_finite(out, grads)
     assert torch.equal(out.colors, torch.tensor([0.2, 0.4, 0.6]).expand_as(out.colors))
@@ -275,7 +315,7 @@ def test_backoff_needs_consecutive_skips_and_has_a_floor():
     assert guard.lr_scale == 1.0 and guard.skipped == 5
     for _ in range(100):
         guard.allow(1.0, {"x": torch.tensor([0.0, math.inf])})
-    assert guard.lr_scale == 2.0 ** -10
+    assert guard.lr_scale == 2.0**-10
 
 
 def test_an_update_that_would_overflow_is_skipped():
@@ -329,20 +369,29 @@ def test_densifying_absurd_scales_keeps_every_value_finite(percent_dense, caplog
     (counted, logged, bit-identical); everything else splits or clones into finite values. With
     percent_dense 0 even the tiny ones are split."""
     names = sorted(ABSURD_LOG_SCALES)
-    rows = [{"mean": (0.1 * i, -0.05 * i, 2.0), "log_scale": ABSURD_LOG_SCALES[name],
-             "quat": (0.9, 0.3, -0.2, 0.25)} for i, name in enumerate(names)]
+    rows = [
+        {"mean": (0.1 * i, -0.05 * i, 2.0), "log_scale": ABSURD_LOG_SCALES[name], "quat": (0.9, 0.3, -0.2, 0.25)}
+        for i, name in enumerate(names)
+    ]
     opt = GaussianAdam(raw_scene(rows), dict.fromkeys(PARAM_NAMES, 1e-3))
     before = {k: v.detach().clone() for k, v in opt.scene.tensors().items()}
     stats = DensityStats(len(rows))
     stats.grad_sum[:], stats.count[:] = 1.0, 1  # every Gaussian is due to grow
     with caplog.at_level(logging.WARNING, logger="gt2gs_blender.core.train.densify"):
-        report = densify_and_prune(opt, stats, DensifyConfig(percent_dense=percent_dense), 1.0, prune_large=False,
-                                   generator=torch.Generator().manual_seed(0))
+        report = densify_and_prune(
+            opt,
+            stats,
+            DensifyConfig(percent_dense=percent_dense),
+            1.0,
+            prune_large=False,
+            generator=torch.Generator().manual_seed(0),
+        )
     for name, t in opt.scene.tensors().items():
         assert bool(torch.isfinite(t).all()), name
     overflowing = [i for i, name in enumerate(names) if max(ABSURD_LOG_SCALES[name]) > FLOAT32_MAX_LOG]
-    small = [i for i, name in enumerate(names)
-             if float(torch.tensor(ABSURD_LOG_SCALES[name]).exp().max()) <= percent_dense]
+    small = [
+        i for i, name in enumerate(names) if float(torch.tensor(ABSURD_LOG_SCALES[name]).exp().max()) <= percent_dense
+    ]
     assert report.unsplit == len(overflowing) == 2 and report.pruned == 0
     assert report.cloned == len(small) and report.split == len(rows) - len(small) - len(overflowing)
     assert report.total == len(opt.scene) == len(rows) + report.cloned + report.split
@@ -350,8 +399,8 @@ def test_densifying_absurd_scales_keeps_every_value_finite(percent_dense, caplog
     survivors = sorted(overflowing + small)  # first, in their order, exactly as they were
     after = {k: v.detach() for k, v in opt.scene.tensors().items()}
     for name, t in after.items():
-        assert torch.equal(t[:len(survivors)], before[name][survivors]), name
-        assert torch.equal(t[len(survivors):len(survivors) + len(small)], before[name][small]), name  # clones
+        assert torch.equal(t[: len(survivors)], before[name][survivors]), name
+        assert torch.equal(t[len(survivors) : len(survivors) + len(small)], before[name][small]), name  # clones
     parents = torch.tensor([i for i in range(len(rows)) if i not in survivors]).repeat_interleave(2)
-    children = after["log_scales"][len(survivors) + len(small):]
+    children = after["log_scales"][len(survivors) + len(small) :]
     assert torch.allclose(children, before["log_scales"][parents] - math.log(1.6))

@@ -1,4 +1,5 @@
 """The stylise/correct schedule: GPB pulls geometry back, region control, orientation control, densification."""
+
 from __future__ import annotations
 
 import math
@@ -10,17 +11,17 @@ import torch
 
 from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.generate import auto_views
-from gt2gs_blender.core.transfer.config import TransferConfig
-from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.extractor import FeatureExtractor
-from gt2gs_blender.core.transfer.losses import anisotropy
+from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
+from gt2gs_blender.core.features.weights import ResolvedWeights
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.losses import anisotropy
+from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.stylise import GEOMETRY, Styliser
 from gt2gs_blender.core.transfer.texture_bank import build_texture_bank
 from gt2gs_blender.core.transfer.views import render_views, view_targets
-from gt2gs_blender.core.transfer.pipeline import transfer
-from gt2gs_blender.core.features.weights import ResolvedWeights
 
 from .test_transfer import blob_scene, stripes, tiny
 
@@ -30,14 +31,20 @@ def random_extractor() -> FeatureExtractor:
     return FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
 
 
-def gpb_only(original: GaussianScene, start: GaussianScene, cameras: list[Camera], config: TransferConfig,
-             background: torch.Tensor) -> Styliser:
+def gpb_only(
+    original: GaussianScene,
+    start: GaussianScene,
+    cameras: list[Camera],
+    config: TransferConfig,
+    background: torch.Tensor,
+) -> Styliser:
     """A styliser of ``start`` whose content images are renders of ``original`` (random features, a tiny bank)."""
     content = render_views(original, cameras, background, "auto")
     extractor = random_extractor()
     targets = view_targets(content, original, extractor, config, "auto")
-    bank = build_texture_bank(stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2,
-                              texture_height=64)
+    bank = build_texture_bank(
+        stripes(), lambda x: extractor(x, scale=1.0), extractor_id="test", n_scales=1, n_angles=2, texture_height=64
+    )
     return Styliser(start, targets, list(range(len(cameras))), bank, extractor, config, background)
 
 
@@ -65,8 +72,9 @@ def test_geometry_preservation_branch_pulls_perturbed_geometry_back():
     render with the pre-stylisation colours returns toward the content image."""
     original = blob_scene(800, seed=2).with_sh_degree(0)
     cameras = auto_views(original, 6, width=48, height=48)
-    config = TransferConfig(stylise_steps=0, correct_steps=120, rounds=1, gpb=True, densify=False, n_scales=1,
-                            lambda_scale=0.0)
+    config = TransferConfig(
+        stylise_steps=0, correct_steps=120, rounds=1, gpb=True, densify=False, n_scales=1, lambda_scale=0.0
+    )
     background = torch.ones(3)
     noise = torch.randn(original.means.shape, generator=torch.Generator().manual_seed(0)) * 0.03
     perturbed = replace(original, means=original.means + noise)
@@ -74,8 +82,10 @@ def test_geometry_preservation_branch_pulls_perturbed_geometry_back():
 
     def errors() -> tuple[float, float]:
         scene = styliser.scene.detach()
-        image_error = sum(float((render(scene, [t.camera], background=background).colors[0] - t.content_image)
-                                .abs().mean()) for t in styliser.views)
+        image_error = sum(
+            float((render(scene, [t.camera], background=background).colors[0] - t.content_image).abs().mean())
+            for t in styliser.views
+        )
         return float((scene.means - original.means).norm(dim=1).mean()), image_error
 
     start_distance, start_image = errors()
@@ -91,8 +101,9 @@ def test_stylise_phases_move_geometry_only_when_told(stylise_geometry):
     (the authors' coupled optimisation) lets the texture loss move all of them."""
     original = blob_scene(300, seed=4).with_sh_degree(0)
     cameras = auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(stylise_steps=4, correct_steps=0, rounds=1, densify=False, n_scales=1,
-                            stylise_geometry=stylise_geometry)
+    config = TransferConfig(
+        stylise_steps=4, correct_steps=0, rounds=1, densify=False, n_scales=1, stylise_geometry=stylise_geometry
+    )
     styliser = gpb_only(original, original, cameras, config, torch.ones(3))
     for _ in range(config.stylise_steps):
         styliser.stylise_step(densify=False)
@@ -110,8 +121,15 @@ def test_stylise_renders_see_the_object_not_the_background(object_backdrop):
     Previews are over the background either way. (AFCM off: its detail map keeps the outline on purpose.)"""
     original = blob_scene(300, seed=4).with_sh_degree(0)
     cameras = auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(stylise_steps=3, correct_steps=0, rounds=1, densify=False, n_scales=1, afcm=False,
-                            object_backdrop=object_backdrop)
+    config = TransferConfig(
+        stylise_steps=3,
+        correct_steps=0,
+        rounds=1,
+        densify=False,
+        n_scales=1,
+        afcm=False,
+        object_backdrop=object_backdrop,
+    )
     colours = []
     for background in (torch.ones(3), torch.zeros(3)):
         styliser = gpb_only(original, original, cameras, config, background)
@@ -128,8 +146,17 @@ def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_g
     scene = blob_scene()  # SH degree 1, with an extra property
     region = torch.zeros(len(scene), dtype=torch.bool)
     region[::3] = True
-    config = tiny(cache_dir=str(tmp_path), stylise_steps=6, correct_steps=4, rounds=2, gpb=True, densify=True,
-                  densify_every=2, densify_grad_threshold=0.0, stylise_geometry=stylise_geometry)
+    config = tiny(
+        cache_dir=str(tmp_path),
+        stylise_steps=6,
+        correct_steps=4,
+        rounds=2,
+        gpb=True,
+        densify=True,
+        densify_every=2,
+        densify_grad_threshold=0.0,
+        stylise_geometry=stylise_geometry,
+    )
     result = transfer(scene, stripes(), None, config, region=region)
     out, kept = result.scene, int((~region).sum())
     outside = scene.subset(~region)
@@ -146,8 +173,9 @@ def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_g
 
 
 def test_full_schedule_reports_its_phases(tmp_path):
-    config = tiny(cache_dir=str(tmp_path), stylise_steps=6, correct_steps=4, rounds=2, gpb=True, densify=True,
-                  densify_every=3)
+    config = tiny(
+        cache_dir=str(tmp_path), stylise_steps=6, correct_steps=4, rounds=2, gpb=True, densify=True, densify_every=3
+    )
     result = transfer(blob_scene(), stripes(), None, config)
     stats = result.report["stylise"]
     assert stats["stylise_steps"] == 6 and stats["correct_steps"] == 4 and stats["skipped_steps"] == 0
@@ -169,10 +197,13 @@ def plane_and_views() -> tuple[GaussianScene, list[Camera]]:
     y, x = torch.meshgrid(coords, coords, indexing="ij")
     means = torch.stack([x, y, torch.full_like(x, 3.0)], -1).reshape(-1, 3)
     spacing = float(coords[1] - coords[0])
-    scene = GaussianScene.from_activated(means, torch.tensor([spacing * 0.7, spacing * 0.7, 1e-3]).expand(n * n, 3),
-                                         torch.full((n * n,), 0.99), torch.full((n * n, 3), 0.5))
-    cams = [Camera.from_cam_to_world(np.eye(3), [0.15 * k, 0.0, 0.0], 90.0, 90.0, 40.0, 40.0, 80, 80)
-            for k in range(3)]
+    scene = GaussianScene.from_activated(
+        means,
+        torch.tensor([spacing * 0.7, spacing * 0.7, 1e-3]).expand(n * n, 3),
+        torch.full((n * n,), 0.99),
+        torch.full((n * n, 3), 0.5),
+    )
+    cams = [Camera.from_cam_to_world(np.eye(3), [0.15 * k, 0.0, 0.0], 90.0, 90.0, 40.0, 40.0, 80, 80) for k in range(3)]
     return scene, cams
 
 
@@ -180,11 +211,23 @@ def plane_and_views() -> tuple[GaussianScene, list[Camera]]:
 def test_orientation_control_turns_the_texture(shared, tmp_path):
     """Issue 5: start angle 0 vs 90 gives renders whose dominant orientation differs by 90 +- 15."""
     scene, cams = plane_and_views()
-    y, x = np.mgrid[0:128, 0:128]
+    _y, x = np.mgrid[0:128, 0:128]
     bars = np.repeat((((x // 8) % 2) * 0.8 + 0.1)[..., None], 3, axis=-1).astype(np.float32)  # vertical bars
-    config = TransferConfig(resolution=80, stylise_steps=60, n_scales=1, n_angles=8, texture_height=128,
-                            lambda_prior=100.0, lambda_content=0.0, gpb=False, densify=False, evaluate=False,
-                            weights_path=str(shared / "weights"), cache_dir=str(tmp_path), lr=0.05)
+    config = TransferConfig(
+        resolution=80,
+        stylise_steps=60,
+        n_scales=1,
+        n_angles=8,
+        texture_height=128,
+        lambda_prior=100.0,
+        lambda_content=0.0,
+        gpb=False,
+        densify=False,
+        evaluate=False,
+        weights_path=str(shared / "weights"),
+        cache_dir=str(tmp_path),
+        lr=0.05,
+    )
     angles = []
     for angle in (0.0, 90.0):
         result = transfer(scene, bars, cams, replace(config, angle=angle))
@@ -204,8 +247,17 @@ def test_correction_keeps_a_fitted_scenes_thin_gaussians_unless_told_otherwise(f
     log_scales[::2, 0] = log_scales[::2, 1] + math.log(30.0)
     original = replace(original, log_scales=log_scales)
     cameras = auto_views(original, 4, width=40, height=40)
-    config = TransferConfig(stylise_steps=0, correct_steps=40, rounds=1, gpb=True, densify=False, n_scales=1,
-                            lambda_scale=0.1, scale_ratio_limit=10.0, scale_ratio_from_start=from_start)
+    config = TransferConfig(
+        stylise_steps=0,
+        correct_steps=40,
+        rounds=1,
+        gpb=True,
+        densify=False,
+        n_scales=1,
+        lambda_scale=0.1,
+        scale_ratio_limit=10.0,
+        scale_ratio_from_start=from_start,
+    )
     styliser = gpb_only(original, original, cameras, config, torch.ones(3))
     run_corrections(styliser)
     ratios = anisotropy(styliser.scene.log_scales.detach())[::2]

@@ -1,4 +1,5 @@
 """Texture loading: every image kind a user may hand in becomes RGB float32 in [0, 1], or a clear error."""
+
 from __future__ import annotations
 
 import struct
@@ -40,10 +41,15 @@ def _palette_png(indices: np.ndarray, palette: np.ndarray) -> bytes:
     height, width = indices.shape
     header = struct.pack(">IIBBBBB", width, height, 8, 3, 0, 0, 0)
     raw = b"".join(b"\x00" + row.astype(np.uint8).tobytes() for row in indices)
-    return b"".join([
-        b"\x89PNG\r\n\x1a\n", _png_chunk(b"IHDR", header), _png_chunk(b"PLTE", palette.astype(np.uint8).tobytes()),
-        _png_chunk(b"IDAT", zlib.compress(raw)), _png_chunk(b"IEND", b""),
-    ])
+    return b"".join(
+        [
+            b"\x89PNG\r\n\x1a\n",
+            _png_chunk(b"IHDR", header),
+            _png_chunk(b"PLTE", palette.astype(np.uint8).tobytes()),
+            _png_chunk(b"IDAT", zlib.compress(raw)),
+            _png_chunk(b"IEND", b""),
+        ]
+    )
 
 
 def _with_exif_orientation(jpeg: bytes, orientation: int) -> bytes:
@@ -70,7 +76,7 @@ def test_grayscale_png_becomes_three_equal_channels(tmp_path):
 
 
 def test_sixteen_bit_png_keeps_its_precision(tmp_path):
-    rgb16 = (_rgb_pattern().astype(np.uint16) * 257 + np.arange(96, dtype=np.uint16)[None, :, None])
+    rgb16 = _rgb_pattern().astype(np.uint16) * 257 + np.arange(96, dtype=np.uint16)[None, :, None]
     texture = _load_quietly(_write(tmp_path / "d.png", cv2.cvtColor(rgb16, cv2.COLOR_RGB2BGR)))
     np.testing.assert_allclose(texture, rgb16 / 65535.0, atol=1e-7)
 
@@ -85,8 +91,8 @@ def test_palette_png_is_expanded(tmp_path):
 
 def test_rgba_fills_transparent_pixels_with_the_mean_visible_colour(tmp_path):
     bgra = np.zeros((70, 70, 4), np.uint8)
-    bgra[:, :35] = (0, 0, 255, 255)     # opaque red on the left
-    bgra[:, 35:] = (255, 255, 255, 0)   # transparent junk (white) on the right
+    bgra[:, :35] = (0, 0, 255, 255)  # opaque red on the left
+    bgra[:, 35:] = (255, 255, 255, 0)  # transparent junk (white) on the right
     with pytest.warns(UserWarning, match="50% of the texture is transparent"):
         texture = load_texture(_write(tmp_path / "a.png", bgra))
     np.testing.assert_allclose(texture, np.broadcast_to([1.0, 0.0, 0.0], texture.shape))
@@ -94,10 +100,10 @@ def test_rgba_fills_transparent_pixels_with_the_mean_visible_colour(tmp_path):
 
 def test_exif_orientation_of_a_photograph_is_applied(tmp_path):
     image = np.zeros((64, 128, 3), np.uint8)
-    image[:, 64:] = 255                  # left black, right white
+    image[:, 64:] = 255  # left black, right white
     _, jpeg = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, 95])
     path = tmp_path / "photo.jpg"
-    path.write_bytes(_with_exif_orientation(jpeg.tobytes(), 6))   # 6: rotate 90 degrees clockwise to display
+    path.write_bytes(_with_exif_orientation(jpeg.tobytes(), 6))  # 6: rotate 90 degrees clockwise to display
     texture = load_texture(path)
     assert texture.shape == (128, 64, 3)
     assert texture[:60].mean() < 0.05 and texture[68:].mean() > 0.95
@@ -113,7 +119,7 @@ def test_unicode_path_is_readable(tmp_path):
 def test_corrupt_files_raise_input_file_error(tmp_path, content):
     path = tmp_path / "bad.png"
     path.write_bytes(content)
-    with pytest.raises(InputFileError, match="bad.png: not an image file OpenCV can decode"):
+    with pytest.raises(InputFileError, match=r"bad.png: not an image file OpenCV can decode"):
         load_texture(path)
 
 

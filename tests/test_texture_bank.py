@@ -1,4 +1,5 @@
 """Texture feature bank: labels and scales, the rotation convention, the disk cache, depth groups."""
+
 from __future__ import annotations
 
 import logging
@@ -10,7 +11,17 @@ import torch
 import torch.nn.functional as F
 
 from gt2gs_blender.core.errors import GT2GSError
-from gt2gs_blender.core.transfer.texture_bank import bank_scales, build_texture_bank, cell_groups, covered_cells, crop_side, depth_groups, feature_map_bank, group_depth_ratio, rotate_crop
+from gt2gs_blender.core.transfer.texture_bank import (
+    bank_scales,
+    build_texture_bank,
+    cell_groups,
+    covered_cells,
+    crop_side,
+    depth_groups,
+    feature_map_bank,
+    group_depth_ratio,
+    rotate_crop,
+)
 
 
 class OrientedEnergy(torch.nn.Module):
@@ -57,8 +68,16 @@ def noise_texture(height: int = 96, width: int = 112, seed: int = 0) -> np.ndarr
 
 def test_labels_scales_and_counts():
     spy = Spy(OrientedEnergy())
-    bank = build_texture_bank(noise_texture(), spy, extractor_id="toy", n_scales=3, n_angles=8,
-                              texture_height=128, cells=2, batch_pixels=3 * 80 * 80)
+    bank = build_texture_bank(
+        noise_texture(),
+        spy,
+        extractor_id="toy",
+        n_scales=3,
+        n_angles=8,
+        texture_height=128,
+        cells=2,
+        batch_pixels=3 * 80 * 80,
+    )
     assert len(bank) == 3 * 8 * 2 * 2 and bank.features.shape == (96, 8) and bank.features.dtype == torch.float32
     torch.testing.assert_close(bank.features.norm(dim=1), torch.ones(96))
     assert bank.scales == pytest.approx((1.0, 1 / 1.5, 0.5)) and bank.angles == tuple(range(0, 360, 45))
@@ -77,8 +96,9 @@ def test_feature_map_bank_is_every_cell_of_the_texture_as_it_lies():
     """NNFM's bank: the whole map at texture_height, unrotated (its cells match the labelled bank's
     photo angle), unlabelled."""
     extractor = OrientedEnergy()
-    labelled = build_texture_bank(stripes(128, 0.0), extractor, extractor_id="toy", n_scales=1, n_angles=36,
-                                  texture_height=128, cells=4)
+    labelled = build_texture_bank(
+        stripes(128, 0.0), extractor, extractor_id="toy", n_scales=1, n_angles=36, texture_height=128, cells=4
+    )
     bank = feature_map_bank(stripes(256, 30.0), extractor, extractor_id="toy", texture_height=128)
     assert len(bank) == 32 * 32 and bank.features.shape == (1024, 8)  # 128 px at stride 4
     torch.testing.assert_close(bank.features.norm(dim=1), torch.ones(1024))
@@ -100,8 +120,9 @@ def test_bank_scales_follow_the_depth_ratio():
 
 def test_best_matching_label_of_rotated_stripes_is_their_angle():
     extractor = OrientedEnergy()
-    bank = build_texture_bank(stripes(128, 0.0), extractor, extractor_id="toy", n_scales=1, n_angles=36,
-                              texture_height=128, cells=4)
+    bank = build_texture_bank(
+        stripes(128, 0.0), extractor, extractor_id="toy", n_scales=1, n_angles=36, texture_height=128, cells=4
+    )
     for phi in (30.0, 47.0, 123.0, 200.0, 293.0):
         feats = extractor(torch.from_numpy(stripes(96, phi)).permute(2, 0, 1)[None])[0, :, 3:-3, 3:-3]
         queries = F.normalize(feats.permute(1, 2, 0).reshape(-1, 8), dim=1)
@@ -119,15 +140,15 @@ def test_rotating_the_texture_by_90_degrees_shifts_the_labels_by_90():
     per_angle = 16
     for a in range(12):
         shifted = (a + 3) % 12
-        ours = turned.features[a * per_angle:(a + 1) * per_angle]
-        theirs = bank.features[shifted * per_angle:(shifted + 1) * per_angle]
+        ours = turned.features[a * per_angle : (a + 1) * per_angle]
+        theirs = bank.features[shifted * per_angle : (shifted + 1) * per_angle]
         assert float((ours * theirs).sum(dim=1).min()) > 0.995, a
 
 
 def test_rotate_crop_is_exact_for_quarter_turns_and_never_shows_a_border():
     texture = noise_texture(64, 64, seed=2)
     side = crop_side(64, 64)
-    centre = texture[(64 - side) // 2:(64 + side) // 2, (64 - side) // 2:(64 + side) // 2]
+    centre = texture[(64 - side) // 2 : (64 + side) // 2, (64 - side) // 2 : (64 + side) // 2]
     np.testing.assert_allclose(rotate_crop(texture, 0.0, side), centre, atol=1e-6)
     np.testing.assert_allclose(rotate_crop(texture, 90.0, side), np.rot90(centre), atol=1e-5)
     ones = np.ones((64, 80, 3), np.float32)
@@ -140,7 +161,7 @@ def test_capped_crops_give_the_same_centre_features_when_they_cover_the_receptiv
     spy = Spy(OrientedEnergy())
     kwargs = {"extractor_id": "toy", "n_scales": 1, "n_angles": 5, "texture_height": 128, "cells": 4}
     full = build_texture_bank(texture, OrientedEnergy(), **kwargs)
-    capped = build_texture_bank(texture, spy, max_crop=50, **kwargs)   # 16 px of cells + 2 x 9 px of field
+    capped = build_texture_bank(texture, spy, max_crop=50, **kwargs)  # 16 px of cells + 2 x 9 px of field
     assert {s[-1] for s in spy.shapes} == {48}
     torch.testing.assert_close(capped.features, full.features, atol=1e-6, rtol=0)
 
@@ -148,8 +169,14 @@ def test_capped_crops_give_the_same_centre_features_when_they_cover_the_receptiv
 def test_cache_hit_is_identical_and_keyed_by_content_and_settings(tmp_path):
     texture = noise_texture(64, 64, seed=1)
     spy = Spy(OrientedEnergy())
-    kwargs = {"extractor_id": "toy-v1", "n_scales": 2, "n_angles": 6, "texture_height": 96, "cells": 2,
-              "cache_dir": tmp_path}
+    kwargs = {
+        "extractor_id": "toy-v1",
+        "n_scales": 2,
+        "n_angles": 6,
+        "texture_height": 96,
+        "cells": 2,
+        "cache_dir": tmp_path,
+    }
     first = build_texture_bank(texture, spy, **kwargs)
     calls = len(spy.shapes)
     assert calls > 0 and len(list(tmp_path.glob("bank-*.npz"))) == 1
@@ -171,8 +198,14 @@ def test_cache_hit_is_identical_and_keyed_by_content_and_settings(tmp_path):
 
 def test_corrupt_cache_is_rebuilt_with_a_warning(tmp_path, caplog):
     texture = noise_texture(64, 64, seed=1)
-    kwargs = {"extractor_id": "toy", "n_scales": 1, "n_angles": 4, "texture_height": 96, "cells": 2,
-              "cache_dir": tmp_path}
+    kwargs = {
+        "extractor_id": "toy",
+        "n_scales": 1,
+        "n_angles": 4,
+        "texture_height": 96,
+        "cells": 2,
+        "cache_dir": tmp_path,
+    }
     good = build_texture_bank(texture, OrientedEnergy(), **kwargs)
     (cache,) = tmp_path.glob("bank-*.npz")
     cache.write_bytes(cache.read_bytes()[:100])
@@ -185,19 +218,29 @@ def test_corrupt_cache_is_rebuilt_with_a_warning(tmp_path, caplog):
 
 def test_progress_is_reported_and_a_too_small_texture_is_a_clear_error():
     seen: list[float] = []
-    build_texture_bank(noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=2, n_angles=5,
-                       texture_height=96, cells=2, batch_pixels=1, progress=seen.append)
+    build_texture_bank(
+        noise_texture(),
+        OrientedEnergy(),
+        extractor_id="toy",
+        n_scales=2,
+        n_angles=5,
+        texture_height=96,
+        cells=2,
+        batch_pixels=1,
+        progress=seen.append,
+    )
     assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0) and len(seen) == 10
     with pytest.raises(GT2GSError, match="too small for the feature bank"):
-        build_texture_bank(noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=1, n_angles=2,
-                           texture_height=40, cells=8)
+        build_texture_bank(
+            noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=1, n_angles=2, texture_height=40, cells=8
+        )
 
 
 def test_depth_groups_bin_the_surface_depth_nearest_first():
-    z = torch.tensor([2.0, 2.4, 3.2, 3.9, 4.2, 4.9, 5.1, 5.8, 6.0]).repeat(3, 1)   # bin edges 3, 4, 5
+    z = torch.tensor([2.0, 2.4, 3.2, 3.9, 4.2, 4.9, 5.1, 5.8, 6.0]).repeat(3, 1)  # bin edges 3, 4, 5
     alpha = torch.full_like(z, 0.8)
-    alpha[2, :4] = 0.2                                       # poorly covered: no group
-    groups = depth_groups(z * alpha, alpha, 4)               # the rasterizer's depth is sum(T alpha z)
+    alpha[2, :4] = 0.2  # poorly covered: no group
+    groups = depth_groups(z * alpha, alpha, 4)  # the rasterizer's depth is sum(T alpha z)
     assert groups[0].tolist() == [0, 0, 1, 1, 2, 2, 3, 3, 3]
     assert groups[2].tolist() == [-1, -1, -1, -1, 2, 2, 3, 3, 3]
     fixed = depth_groups(z * alpha, alpha, 2, depth_range=(0.0, 13.0))
@@ -207,9 +250,9 @@ def test_depth_groups_bin_the_surface_depth_nearest_first():
 
 
 def test_group_depth_ratio_is_the_far_over_the_near_bin_centre():
-    z = torch.linspace(2.0, 4.0, 101).repeat(2, 1)            # bins of 0.5: centres 2.25 ... 3.75
+    z = torch.linspace(2.0, 4.0, 101).repeat(2, 1)  # bins of 0.5: centres 2.25 ... 3.75
     alpha = torch.full_like(z, 0.9)
-    alpha[1, 60:] = 0.1                                      # poorly covered pixels don't count
+    alpha[1, 60:] = 0.1  # poorly covered pixels don't count
     assert group_depth_ratio(z * alpha, alpha, 4) == pytest.approx(3.75 / 2.25)
     assert group_depth_ratio(z[:1] * alpha[:1], alpha[:1], 2) == pytest.approx(3.5 / 2.5)
     assert group_depth_ratio(z * alpha, alpha, 1) == 1.0
@@ -233,12 +276,14 @@ def test_measured_bank_scales_give_every_depth_group_the_same_world_scale(near, 
 
 
 def test_cell_groups_take_the_most_frequent_group_of_each_cell():
-    groups = torch.tensor([
-        [0, 0, 1, 1, 2, 2],
-        [0, 1, 1, 1, 2, -1],
-        [3, 3, -1, -1, 2, 2],
-        [3, 0, -1, 1, -1, -1],
-    ])
+    groups = torch.tensor(
+        [
+            [0, 0, 1, 1, 2, 2],
+            [0, 1, 1, 1, 2, -1],
+            [3, 3, -1, -1, 2, 2],
+            [3, 0, -1, 1, -1, -1],
+        ]
+    )
     assert cell_groups(groups, (2, 3)).tolist() == [[0, 1, 2], [3, -1, -1]]
     batch = torch.stack([groups, groups.flip(-1)])
     out = cell_groups(batch, (2, 3))
@@ -248,12 +293,14 @@ def test_cell_groups_take_the_most_frequent_group_of_each_cell():
 
 
 def test_covered_cells_need_a_majority_of_covered_pixels():
-    alpha = torch.tensor([
-        [1.0, 1.0, 0.6, 0.0],
-        [1.0, 0.0, 0.4, 0.0],
-        [0.5, 0.5, 0.0, 0.0],
-        [0.49, 0.9, 0.0, 1.0],
-    ])
+    alpha = torch.tensor(
+        [
+            [1.0, 1.0, 0.6, 0.0],
+            [1.0, 0.0, 0.4, 0.0],
+            [0.5, 0.5, 0.0, 0.0],
+            [0.49, 0.9, 0.0, 1.0],
+        ]
+    )
     # cells of 2x2 pixels: 3/4, 1/4, 3/4 and 1/4 covered at alpha >= 0.5
     assert covered_cells(alpha, (2, 2)).tolist() == [[True, False], [True, False]]
     # exactly half covered is not a majority

@@ -1,16 +1,18 @@
 """The texture-transfer pipeline end to end on small scenes: contract, determinism, cancel, progress."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.transfer.config import PRESETS, TransferConfig, preset
-from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.progress import Cancelled
-from gt2gs_blender.core.transfer.views import ViewSet
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.bank import bank_depth_ratio
+from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.presets import PRESETS, preset
+from gt2gs_blender.core.transfer.views import ViewSet
 
 
 def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
@@ -18,8 +20,12 @@ def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
     g = torch.Generator().manual_seed(seed)
     means = torch.randn(n, 3, generator=g) * 0.3
     scene = GaussianScene.from_activated(
-        means, torch.full((n, 3), 0.04), torch.full((n,), 0.8), torch.rand(n, 3, generator=g) * 0.5 + 0.25,
-        quats=torch.randn(n, 4, generator=g), sh_degree=1,
+        means,
+        torch.full((n, 3), 0.04),
+        torch.full((n,), 0.8),
+        torch.rand(n, 3, generator=g) * 0.5 + 0.25,
+        quats=torch.randn(n, 4, generator=g),
+        sh_degree=1,
     )
     scene.extras = {"confidence": np.arange(n, dtype=np.float32)}
     return scene
@@ -33,8 +39,19 @@ def stripes(size: int = 96) -> np.ndarray:
 
 
 def tiny(**overrides) -> TransferConfig:
-    base = dict(resolution=48, n_views=3, stylise_steps=4, n_scales=2, n_angles=4, texture_height=96,
-                evaluate=False, cache_dir=None, preview_every=2, gpb=False, densify=False)
+    base = dict(
+        resolution=48,
+        n_views=3,
+        stylise_steps=4,
+        n_scales=2,
+        n_angles=4,
+        texture_height=96,
+        evaluate=False,
+        cache_dir=None,
+        preview_every=2,
+        gpb=False,
+        densify=False,
+    )
     base.update(overrides)
     return TransferConfig(**base)
 
@@ -145,8 +162,13 @@ def test_threads_cap_the_run_and_are_restored(cache):
     """``threads`` sets torch's (and the C++ rasterizer's) thread count while the run works, then puts it back."""
     before = torch.get_num_threads()
     seen = []
-    transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, threads=1),
-             progress=lambda p: seen.append(torch.get_num_threads()))
+    transfer(
+        blob_scene(),
+        stripes(),
+        None,
+        tiny(cache_dir=cache, threads=1),
+        progress=lambda p: seen.append(torch.get_num_threads()),
+    )
     assert seen and set(seen) == {1}
     assert torch.get_num_threads() == before
     with pytest.raises(ValueError, match="threads"):
@@ -182,8 +204,10 @@ def test_object_colour_is_the_mean_of_covered_pixels():
     """The stylise backdrop: the un-premultiplied colour of pixels over the alpha threshold, all views
     together; with nothing covered, the background."""
     alphas = [torch.tensor([[1.0, 0.95], [0.5, 0.0]]), torch.tensor([[0.92, 0.0], [0.0, 0.0]])]
-    colours = [torch.tensor([[[0.2, 0.4, 0.6], [0.4, 0.4, 0.4]], [[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]]),
-               torch.tensor([[[0.6, 0.1, 0.2], [0.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])]
+    colours = [
+        torch.tensor([[[0.2, 0.4, 0.6], [0.4, 0.4, 0.4]], [[1.0, 1.0, 1.0], [0.0, 0.0, 0.0]]]),
+        torch.tensor([[[0.6, 0.1, 0.2], [0.0, 0.0, 0.0]], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]]),
+    ]
     premultiplied = [c * a[..., None] for c, a in zip(colours, alphas)]
     views = ViewSet([], premultiplied, alphas, [torch.ones(2, 2)] * 2, torch.ones(3))
     expected = torch.tensor([[0.2, 0.4, 0.6], [0.4, 0.4, 0.4], [0.6, 0.1, 0.2]]).mean(0)

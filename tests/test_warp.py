@@ -1,5 +1,6 @@
 """Reprojection warp against an analytic oracle: a textured plane seen by two cameras, whose
 dst -> src mapping is the plane homography H = K_s (R + t n^T / d) K_d^-1."""
+
 from __future__ import annotations
 
 import math
@@ -33,8 +34,9 @@ DST = camera(0.06, -0.12, [0.9, -0.3, 0.4], cx=32.8, cy=23.1)
 def plane_depth(cam: Camera) -> torch.Tensor:
     """Exact camera depth of the plane at every pixel centre (ray-plane intersection)."""
     uv = pixel_centres(cam).numpy()
-    rays_cam = np.concatenate([(uv[..., :1] - cam.cx) / cam.fx, (uv[..., 1:] - cam.cy) / cam.fy,
-                               np.ones((H, W, 1))], -1)
+    rays_cam = np.concatenate(
+        [(uv[..., :1] - cam.cx) / cam.fx, (uv[..., 1:] - cam.cy) / cam.fy, np.ones((H, W, 1))], -1
+    )
     rays_world = rays_cam @ cam.world_to_cam[:3, :3]
     return torch.from_numpy((OFFSET - NORMAL @ cam.center) / (rays_world @ NORMAL))
 
@@ -42,8 +44,9 @@ def plane_depth(cam: Camera) -> torch.Tensor:
 def pattern(points: torch.Tensor) -> torch.Tensor:
     """A smooth RGB texture painted on the plane, a function of world position."""
     x, y = points[..., 0], points[..., 1]
-    return torch.stack([0.5 + 0.4 * torch.sin(2.5 * x), 0.5 + 0.4 * torch.cos(2.0 * y),
-                        0.5 + 0.3 * torch.sin(x + y)], -1)
+    return torch.stack(
+        [0.5 + 0.4 * torch.sin(2.5 * x), 0.5 + 0.4 * torch.cos(2.0 * y), 0.5 + 0.3 * torch.sin(x + y)], -1
+    )
 
 
 def homography_dst_to_src() -> np.ndarray:

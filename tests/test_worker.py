@@ -1,4 +1,5 @@
 """The worker process and its Blender-side handle (bpy-free): events, outputs, cancel, crash, bad input."""
+
 from __future__ import annotations
 
 import functools
@@ -15,42 +16,57 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
 from gt2gs_blender.app import deps
+from gt2gs_blender.app.images import write_png
+from gt2gs_blender.app.protocol import EXIT_INPUT, EXIT_MEMORY, JobSpec
+from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, Job
 from gt2gs_blender.core.cameras.cameras_json import save_cameras_json
+from gt2gs_blender.core.errors import MEMORY_ADVICE
 from gt2gs_blender.core.scene.ply import read_ply_arrays
 from gt2gs_blender.core.scene.ply_write import write_ply
-from gt2gs_blender.core.errors import MEMORY_ADVICE
-from gt2gs_blender.app.protocol import EXIT_INPUT, EXIT_MEMORY, JobSpec
-from gt2gs_blender.app.images import write_png
 
 from .test_bad_inputs import BLIND_CAMERAS
 from .test_transfer import blob_scene, stripes
 
 ROOT = Path(__file__).resolve().parents[1]
-TINY = dict(resolution=48, n_views=3, stylise_steps=6, n_scales=2, n_angles=4, texture_height=96, evaluate=False,
-            preview_every=2)
+TINY = dict(
+    resolution=48,
+    n_views=3,
+    stylise_steps=6,
+    n_scales=2,
+    n_angles=4,
+    texture_height=96,
+    evaluate=False,
+    preview_every=2,
+)
 
 
 HEADROOM = 1 << 30
 """Address space a capped worker may add to what torch and the engine take once loaded: a tiny job
 peaks ~150 MiB above that, a job at 4096 px needs several GiB."""
-OUT_OF_MEMORY = re.compile(rf"ran out of memory( \(an allocation of [\d.]+ (bytes|MiB|GiB) failed\))?: "
-                           rf"{re.escape(MEMORY_ADVICE)}")
+OUT_OF_MEMORY = re.compile(
+    rf"ran out of memory( \(an allocation of [\d.]+ (bytes|MiB|GiB) failed\))?: "
+    rf"{re.escape(MEMORY_ADVICE)}"
+)
 """The message of a failed allocation: torch's allocators say the size; a bare MemoryError does not."""
-needs_prlimit = pytest.mark.skipif(not hasattr(resource, "prlimit") or not Path("/proc/self/status").exists(),
-                                   reason="capping another process's address space needs Linux")
+needs_prlimit = pytest.mark.skipif(
+    not hasattr(resource, "prlimit") or not Path("/proc/self/status").exists(),
+    reason="capping another process's address space needs Linux",
+)
 
 
 @functools.cache
 def address_space_cap() -> int:
     """Bytes of address space for a capped worker: what a fresh Python takes once torch and the
     engine are loaded (as the worker will have them), plus HEADROOM."""
-    probe = ("import pathlib, gt2gs_blender.core.transfer.pipeline, gt2gs_blender.core.transfer.visibility; "
-             "print(next(l.split()[1] for l in pathlib.Path('/proc/self/status').read_text().splitlines() "
-             "if l.startswith('VmSize:')))")
-    result = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120,
-                            check=True)
+    probe = (
+        "import pathlib, gt2gs_blender.core.transfer.pipeline, gt2gs_blender.core.transfer.visibility; "
+        "print(next(l.split()[1] for l in pathlib.Path('/proc/self/status').read_text().splitlines() "
+        "if l.startswith('VmSize:')))"
+    )
+    result = subprocess.run(
+        [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120, check=True
+    )
     return int(result.stdout) * 1024 + HEADROOM
 
 
@@ -79,9 +95,16 @@ def job(tmp_path):
 
 
 def transfer_spec(tmp_path, **config) -> dict:
-    return {"kind": "transfer", "input": "input.ply", "texture": "texture.png", "output": "out.ply",
-            "report": "report.json", "views": 3, "preset": "preview",
-            "config": {**TINY, "cache_dir": str(tmp_path / "banks"), **config}}
+    return {
+        "kind": "transfer",
+        "input": "input.ply",
+        "texture": "texture.png",
+        "output": "out.ply",
+        "report": "report.json",
+        "views": 3,
+        "preset": "preview",
+        "config": {**TINY, "cache_dir": str(tmp_path / "banks"), **config},
+    }
 
 
 def wait_for(job: Job, condition, timeout: float = 120.0):
@@ -110,7 +133,7 @@ def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
     assert status.report["n_views"] == 3 and status.report["config"]["stylise_steps"] == 6
     original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
     assert colours_differ(result.sh_dc, original.sh_dc)
-    assert not [p for p in job.folder.rglob("*.tmp")]
+    assert not list(job.folder.rglob("*.tmp"))
 
 
 def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
@@ -161,20 +184,30 @@ def test_cameras_that_see_nothing_are_an_input_error_naming_the_files(job, tmp_p
     job.start({**transfer_spec(tmp_path), "views": "cameras.json"})
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
-    assert status.error.startswith(f"{job.path('input.ply')}: no Gaussian is visible in any of the 3 views of "
-                                   f"{job.path('cameras.json')}: all 600 Gaussians are behind the cameras")
+    assert status.error.startswith(
+        f"{job.path('input.ply')}: no Gaussian is visible in any of the 3 views of "
+        f"{job.path('cameras.json')}: all 600 Gaussians are behind the cameras"
+    )
     assert not job.path("out.ply").exists() and not job.path("report.json").exists()
 
 
 def test_messages_use_the_callers_names_for_temporary_exports(job, tmp_path):
     """Blender exports the object and its cameras to the job folder: messages name the object instead."""
     save_cameras_json(job.path("cameras.json"), BLIND_CAMERAS["looking-away"])
-    job.start({**transfer_spec(tmp_path), "views": "cameras.json", "input_name": "object 'Donut'",
-               "views_name": "the scene's cameras"})
+    job.start(
+        {
+            **transfer_spec(tmp_path),
+            "views": "cameras.json",
+            "input_name": "object 'Donut'",
+            "views_name": "the scene's cameras",
+        }
+    )
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
-    assert status.error.startswith("object 'Donut': no Gaussian is visible in any of the 3 views of the scene's "
-                                   "cameras: all 600 Gaussians are behind the cameras")
+    assert status.error.startswith(
+        "object 'Donut': no Gaussian is visible in any of the 3 views of the scene's "
+        "cameras: all 600 Gaussians are behind the cameras"
+    )
     assert str(job.folder) not in status.error
 
 
@@ -186,8 +219,8 @@ def test_region_restyles_only_the_masked_gaussians(job, tmp_path):
     assert status.state == DONE, status.error
     original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
     kept = np.setdiff1d(np.arange(600), selected)
-    assert np.array_equal(result.sh_dc[:len(kept)], original.sh_dc[kept])  # the others, bit-identical, first
-    assert colours_differ(result.sh_dc[len(kept):], original.sh_dc[selected])
+    assert np.array_equal(result.sh_dc[: len(kept)], original.sh_dc[kept])  # the others, bit-identical, first
+    assert colours_differ(result.sh_dc[len(kept) :], original.sh_dc[selected])
 
 
 def test_region_out_of_range_is_an_input_error(job, tmp_path):
@@ -198,8 +231,18 @@ def test_region_out_of_range_is_an_input_error(job, tmp_path):
 
 
 def test_preview_job_writes_a_png(job, tmp_path):
-    job.start({"kind": "preview", "input": "input.ply", "texture": "texture.png", "output": "preview.png",
-               "views": 4, "preset": "preview", "config": {"angle": 30.0}, "preview_size": 64})
+    job.start(
+        {
+            "kind": "preview",
+            "input": "input.ply",
+            "texture": "texture.png",
+            "output": "preview.png",
+            "views": 4,
+            "preset": "preview",
+            "config": {"angle": 30.0},
+            "preview_size": 64,
+        }
+    )
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == DONE, status.error
     import cv2
@@ -209,27 +252,36 @@ def test_preview_job_writes_a_png(job, tmp_path):
 
 def test_job_spec_rejects_malformed_files(tmp_path):
     path = tmp_path / "job.json"
-    for content, message in [("[]", "JSON object"), ('{"kind": "x", "input": "a", "texture": "b", "output": "c"}',
-                                                     "unknown job kind"),
-                             ('{"kind": "preview", "input": "a"}', "lacks texture, output"),
-                             ('{"kind": "preview", "input": "a", "texture": "b", "output": "c", "views": true}',
-                              "views must be")]:
+    for content, message in [
+        ("[]", "JSON object"),
+        ('{"kind": "x", "input": "a", "texture": "b", "output": "c"}', "unknown job kind"),
+        ('{"kind": "preview", "input": "a"}', "lacks texture, output"),
+        ('{"kind": "preview", "input": "a", "texture": "b", "output": "c", "views": true}', "views must be"),
+    ]:
         path.write_text(content)
         with pytest.raises(Exception, match=message):
             JobSpec.load(path)
 
 
 def test_worker_command_line_exit_status(tmp_path):
-    result = subprocess.run([sys.executable, "-m", "gt2gs_blender.app.worker", str(tmp_path / "none.json")],
-                            capture_output=True, text=True, cwd=ROOT, timeout=60)
+    result = subprocess.run(
+        [sys.executable, "-m", "gt2gs_blender.app.worker", str(tmp_path / "none.json")],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=60,
+    )
     assert result.returncode == EXIT_INPUT
     (event,) = [json.loads(line) for line in result.stdout.splitlines()]
     assert event["event"] == "error" and "none.json" in event["message"]
 
 
 def test_pins_match_requirements_txt():
-    pinned = dict(line.split("==") for line in (ROOT / "requirements.txt").read_text().splitlines()
-                  if "==" in line and not line.startswith("#"))
+    pinned = dict(
+        line.split("==")
+        for line in (ROOT / "requirements.txt").read_text().splitlines()
+        if "==" in line and not line.startswith("#")
+    )
     assert {name: pinned[name] for name in deps.PINS} == deps.PINS
 
 

@@ -4,13 +4,14 @@ installs the pinned versions into the extension's own folder (torch is too big t
 Blender's Python never imports these packages: the worker process gets the folder on its
 ``PYTHONPATH``. Versions are read from package metadata, so nothing heavy is imported to check them.
 """
+
 from __future__ import annotations
 
 import importlib.metadata
 import os
 import sys
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 PINS: dict[str, str] = {
     "torch": "2.13.0",
@@ -57,19 +58,34 @@ def dependency_status(deps_dir: str | os.PathLike | None = None) -> list[Depende
     return status
 
 
-def install_command(python: str, target: str | os.PathLike, build: str = "CPU",
-                    pins: dict[str, str] | None = None) -> list[str]:
+def install_command(
+    python: str, target: str | os.PathLike, build: str = "CPU", pins: dict[str, str] | None = None
+) -> list[str]:
     """The pip command installing the pinned packages into ``target`` (torch from the chosen build's index)."""
     if build not in TORCH_INDEX:
         raise ValueError(f"build must be one of {', '.join(TORCH_INDEX)}, got {build!r}")
     requirements = [f"{name}=={version}" for name, version in (pins or PINS).items()]
-    return [python, "-m", "pip", "install", "--upgrade", "--no-input", "--disable-pip-version-check",
-            "--only-binary", ":all:", "--target", os.fspath(target),
-            "--extra-index-url", TORCH_INDEX[build], *requirements]
+    return [
+        python,
+        "-m",
+        "pip",
+        "install",
+        "--upgrade",
+        "--no-input",
+        "--disable-pip-version-check",
+        "--only-binary",
+        ":all:",
+        "--target",
+        os.fspath(target),
+        "--extra-index-url",
+        TORCH_INDEX[build],
+        *requirements,
+    ]
 
 
-def worker_pythonpath(package_parent: str | os.PathLike, deps_dir: str | os.PathLike | None,
-                      inherited: str | None = None) -> str:
+def worker_pythonpath(
+    package_parent: str | os.PathLike, deps_dir: str | os.PathLike | None, inherited: str | None = None
+) -> str:
     """PYTHONPATH for the worker: the deps folder, the folder holding the package, then what was set."""
     parts: Sequence[str | os.PathLike | None] = (deps_dir, package_parent, inherited)
     return os.pathsep.join(os.fspath(p) for p in parts if p)

@@ -17,4 +17,3 @@ def write_png(path: str | os.PathLike, pixels: np.ndarray) -> None:
     if not ok:
         raise OSError(f"{path}: could not encode the PNG")
     atomic_write(path, data.tobytes())
-

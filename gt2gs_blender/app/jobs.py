@@ -45,8 +45,9 @@ def load_region(path: Path, n: int) -> np.ndarray:
         if region.shape != (n,):
             raise InputFileError(path, f"a boolean region needs {n} entries (one per Gaussian), has {region.shape}")
     elif not np.issubdtype(region.dtype, np.integer) or region.ndim != 1:
-        raise InputFileError(path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} "
-                                   f"{region.shape}")
+        raise InputFileError(
+            path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} {region.shape}"
+        )
     return region
 
 
@@ -63,11 +64,20 @@ def read_texture(path: Path) -> np.ndarray:
     return np.clip(image[..., :3], 0.0, 1.0).astype(np.float32)
 
 
-def run_transfer(scene: GaussianScene, texture: np.ndarray, views: Sequence[Camera] | int | None,
-                 config: TransferConfig, output: Path, *, report: Path | None = None,
-                 region: np.ndarray | None = None, progress: ProgressCallback | None = None,
-                 cancel: Callable[[], bool] | None = None, scene_name: str | os.PathLike = "the scene",
-                 views_name: str | None = None) -> TransferResult:
+def run_transfer(
+    scene: GaussianScene,
+    texture: np.ndarray,
+    views: Sequence[Camera] | int | None,
+    config: TransferConfig,
+    output: Path,
+    *,
+    report: Path | None = None,
+    region: np.ndarray | None = None,
+    progress: ProgressCallback | None = None,
+    cancel: Callable[[], bool] | None = None,
+    scene_name: str | os.PathLike = "the scene",
+    views_name: str | None = None,
+) -> TransferResult:
     """Check that the views see the scene, re-texture it, write the result PLY (and the report).
 
     ``scene_name`` and ``views_name`` are what an error calls the scene and the views (None: automatic).
@@ -83,8 +93,10 @@ def run_transfer(scene: GaussianScene, texture: np.ndarray, views: Sequence[Came
 def summary(report: dict) -> str:
     """A few lines: time per stage, the feature network (and a loud note on the fallback), the metrics."""
     stages = ", ".join(f"{k} {v:.1f}s" for k, v in report["stage_seconds"].items())
-    lines = [f"done in {report['seconds']:.1f}s ({stages}); {report['n_gaussians']:,} Gaussians, "
-             f"{report['n_views']} views at {report['image_size'][0]}x{report['image_size'][1]}"]
+    lines = [
+        f"done in {report['seconds']:.1f}s ({stages}); {report['n_gaussians']:,} Gaussians, "
+        f"{report['n_views']} views at {report['image_size'][0]}x{report['image_size'][1]}"
+    ]
     weights = report["weights"]
     lines.append(("WARNING, fallback features: " if weights["fallback"] else "features: ") + weights["reason"])
     metrics = report.get("metrics")

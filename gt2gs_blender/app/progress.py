@@ -26,8 +26,18 @@ class TerminalProgress:
     def __init__(self, what: str, stream: TextIO | None = None) -> None:
         self.stream = sys.stderr if stream is None else stream
         self.tty = self.stream.isatty()
-        self.bar = tqdm(total=STEPS, desc=what, file=self.stream, leave=True, dynamic_ncols=True,
-                        bar_format="{desc} {bar} {percentage:3.0f}% {postfix}") if self.tty else None
+        self.bar = (
+            tqdm(
+                total=STEPS,
+                desc=what,
+                file=self.stream,
+                leave=True,
+                dynamic_ncols=True,
+                bar_format="{desc} {bar} {percentage:3.0f}% {postfix}",
+            )
+            if self.tty
+            else None
+        )
         self.stage: str | None = None
         self.last = 0.0
 

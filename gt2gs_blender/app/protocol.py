@@ -1,13 +1,15 @@
 """The worker's protocol: the job file it reads, the JSON-line events it writes, its exit codes.
 Shared by the worker and by Blender's side of it (``blender/job.py``)."""
+
 from __future__ import annotations
+
 import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
-from ..core.errors import InputFileError
 
+from ..core.errors import InputFileError
 
 EXIT_DONE, EXIT_INTERNAL, EXIT_INPUT, EXIT_CANCELLED, EXIT_MEMORY = 0, 1, 2, 3, 4
 
@@ -35,7 +37,7 @@ class JobSpec:
     views_name: str | None = None
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "JobSpec":
+    def load(cls, path: str | os.PathLike) -> JobSpec:
         """Read and check a job file; any problem is an InputFileError naming it."""
         path = Path(path)
         try:
@@ -49,7 +51,7 @@ class JobSpec:
             raise InputFileError(path, f"the job lacks {', '.join(missing)}")
         if data["kind"] not in KINDS:
             raise InputFileError(path, f"unknown job kind {data['kind']!r}; expected one of {', '.join(KINDS)}")
-        unknown = set(data) - {f for f in cls.__dataclass_fields__}
+        unknown = set(data) - set(cls.__dataclass_fields__)
         if unknown:
             raise InputFileError(path, f"unknown job keys: {', '.join(sorted(unknown))}")
         base = path.parent
@@ -61,13 +63,20 @@ class JobSpec:
         if isinstance(views, bool) or (views is not None and not isinstance(views, (int, str))):
             raise InputFileError(path, f"views must be a cameras file path or a count, got {views!r}")
         return cls(
-            kind=data["kind"], input=resolve(data["input"]), texture=resolve(data["texture"]),
-            output=resolve(data["output"]), views=resolve(views) if isinstance(views, str) else views,
-            preset=data.get("preset") or "fast", config=dict(data.get("config") or {}),
-            region=resolve(data.get("region")), report=resolve(data.get("report")),
-            preview_dir=resolve(data.get("preview_dir")), cancel_file=resolve(data.get("cancel_file")),
+            kind=data["kind"],
+            input=resolve(data["input"]),
+            texture=resolve(data["texture"]),
+            output=resolve(data["output"]),
+            views=resolve(views) if isinstance(views, str) else views,
+            preset=data.get("preset") or "fast",
+            config=dict(data.get("config") or {}),
+            region=resolve(data.get("region")),
+            report=resolve(data.get("report")),
+            preview_dir=resolve(data.get("preview_dir")),
+            cancel_file=resolve(data.get("cancel_file")),
             preview_size=int(data.get("preview_size") or 256),
-            input_name=data.get("input_name") or None, views_name=data.get("views_name") or None,
+            input_name=data.get("input_name") or None,
+            views_name=data.get("views_name") or None,
         )
 
 

@@ -21,13 +21,17 @@ preview is the path of a PNG frame, written atomically, or null), then exactly o
 message says what to lower). Outputs are written atomically and only on success, so a cancelled or
 failed run leaves no result behind.
 """
+
 from __future__ import annotations
+
 import os
 import signal
 import sys
 import traceback
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+
 from ..core.errors import GT2GSError, out_of_memory_message
 from ..core.progress import Cancelled, Progress
 from .protocol import EXIT_CANCELLED, EXIT_DONE, EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, Events, JobSpec
@@ -56,7 +60,7 @@ def _views(spec: JobSpec):
 
 
 def _config(spec: JobSpec):
-    from ..core.transfer.config import preset
+    from ..core.transfer.presets import preset
 
     overrides = dict(spec.config or {})
     if isinstance(overrides.get("background"), list):
@@ -88,31 +92,62 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
             frame = spec.preview_dir / f"preview_{frames:04d}.png"
             write_png(frame, p.preview)
             frames += 1
-        events("progress", stage=p.stage, step=p.step, total=p.total, fraction=p.fraction, eta_s=p.eta_s,
-               message=p.message, preview=None if frame is None else str(frame))
+        events(
+            "progress",
+            stage=p.stage,
+            step=p.step,
+            total=p.total,
+            fraction=p.fraction,
+            eta_s=p.eta_s,
+            message=p.message,
+            preview=None if frame is None else str(frame),
+        )
 
-    run_transfer(scene, texture, views, config, spec.output, report=spec.report, region=region, progress=progress,
-                 cancel=cancel, scene_name=spec.input_name or spec.input, views_name=views_name)
+    run_transfer(
+        scene,
+        texture,
+        views,
+        config,
+        spec.output,
+        report=spec.report,
+        region=region,
+        progress=progress,
+        cancel=cancel,
+        scene_name=spec.input_name or spec.input,
+        views_name=views_name,
+    )
     events("done", output=str(spec.output), report=None if spec.report is None else str(spec.report))
 
 
 def run_preview(spec: JobSpec, events: Events) -> None:
     """Render the orientation preview of the first view as a PNG."""
     from ..core.cameras.generate import auto_views
-    from ..core.transfer.orientation_preview import orientation_preview
     from ..core.scene.ply import read_ply
+    from ..core.transfer.orientation_preview import orientation_preview
     from .images import write_png
     from .jobs import read_texture
 
     scene = read_ply(spec.input)
     config = _config(spec)
     views = _views(spec)
-    camera = views[0] if isinstance(views, list) else auto_views(scene, views or config.n_views, width=spec.preview_size,
-                                                                 height=spec.preview_size)[0]
-    image = orientation_preview(scene, read_texture(spec.texture), camera, config.angle, size=spec.preview_size,
-                                resolution=config.resolution, texture_height=config.texture_height,
-                                n_groups=config.n_scales if config.depth_groups else 1, depth_ratio=config.depth_ratio,
-                                background=config.background, backend=config.backend)
+    camera = (
+        views[0]
+        if isinstance(views, list)
+        else auto_views(scene, views or config.n_views, width=spec.preview_size, height=spec.preview_size)[0]
+    )
+    image = orientation_preview(
+        scene,
+        read_texture(spec.texture),
+        camera,
+        config.angle,
+        size=spec.preview_size,
+        resolution=config.resolution,
+        texture_height=config.texture_height,
+        n_groups=config.n_scales if config.depth_groups else 1,
+        depth_ratio=config.depth_ratio,
+        background=config.background,
+        backend=config.backend,
+    )
     write_png(spec.output, image)
     events("done", output=str(spec.output), report=None)
 
@@ -136,8 +171,11 @@ def run(job_file: str | os.PathLike, events: Events) -> int:
         events("error", message=str(exc))
         return EXIT_INPUT
     except ImportError as exc:
-        events("error", message=f"the Python package {exc.name or exc} is missing in the worker's Python: "
-                                "install the dependencies (add-on preferences, or pip install -r requirements.txt)")
+        events(
+            "error",
+            message=f"the Python package {exc.name or exc} is missing in the worker's Python: "
+            "install the dependencies (add-on preferences, or pip install -r requirements.txt)",
+        )
         return EXIT_INTERNAL
     except Exception as exc:
         traceback.print_exc()

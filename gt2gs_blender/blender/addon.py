@@ -1,4 +1,5 @@
 """The extension's identity in Blender: its add-on id, its preferences and its per-user folders."""
+
 from __future__ import annotations
 
 import bpy
@@ -19,4 +20,3 @@ def deps_dir(create: bool = False) -> str | None:
         return bpy.utils.extension_path_user(ADDON_ID, path="deps", create=create)
     except ValueError:  # not installed as an extension (e.g. registered from a source checkout)
         return None
-

@@ -6,6 +6,7 @@ own Python inside Blender - with the extension's dependency folder first on ``PY
 JSON-line events are read by a thread into a queue, so ``poll()`` never waits on the pipe. Every
 file of a job lives in one temporary folder, removed by ``cleanup()`` once the process has ended.
 """
+
 from __future__ import annotations
 
 import atexit
@@ -65,8 +66,9 @@ class JobStatus:
 class Job:
     """One worker run in its own temporary folder. Write the inputs into ``folder``, then ``start``."""
 
-    def __init__(self, *, python: str | None = None, deps_dir: str | os.PathLike | None = None,
-                 env: dict[str, str] | None = None) -> None:
+    def __init__(
+        self, *, python: str | None = None, deps_dir: str | os.PathLike | None = None, env: dict[str, str] | None = None
+    ) -> None:
         self.folder = Path(tempfile.mkdtemp(prefix="gt2gs_job_"))
         self.python = python or sys.executable
         self.deps_dir = deps_dir
@@ -94,12 +96,21 @@ class Job:
         env["PYTHONPATH"] = worker_pythonpath(PACKAGE_DIR.parent, self.deps_dir, env.get("PYTHONPATH"))
         env["PYTHONUNBUFFERED"] = "1"
         self.process = subprocess.Popen(
-            self.command(), cwd=self.folder, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE, text=True, encoding="utf-8", errors="replace",
+            self.command(),
+            cwd=self.folder,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            encoding="utf-8",
+            errors="replace",
         )
         self.status = JobStatus(state=RUNNING, stage="starting", message="starting the worker")
-        self._readers = [threading.Thread(target=self._read_events, daemon=True),
-                         threading.Thread(target=self._read_stderr, daemon=True)]
+        self._readers = [
+            threading.Thread(target=self._read_events, daemon=True),
+            threading.Thread(target=self._read_stderr, daemon=True),
+        ]
         for reader in self._readers:
             reader.start()
 
@@ -219,7 +230,7 @@ class Job:
         _LIVE.discard(self)
 
 
-_LIVE: "weakref.WeakSet[Job]" = weakref.WeakSet()
+_LIVE: weakref.WeakSet[Job] = weakref.WeakSet()
 
 
 @atexit.register

@@ -16,11 +16,14 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from ..core.transfer.config import DEFAULT_PRESET, IN_SCENE, PRESETS, Setting, user_settings
+from ..core.transfer.config import IN_SCENE, Setting, user_settings
+from ..core.transfer.presets import DEFAULT_PRESET, PRESETS
 
 DEFAULTS = PRESETS[DEFAULT_PRESET]
-PATH_SETTINGS = {"weights_path": "Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth) or "
-                                 "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"}
+PATH_SETTINGS = {
+    "weights_path": "Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth) or "
+    "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"
+}
 """Path settings whose tooltip in Blender says more than the command line's."""
 
 
@@ -52,8 +55,11 @@ def _property(name: str, meta: Setting, kind: type, update: Callable | None) -> 
 
 def _limits(meta: Setting, kind: type) -> dict[str, Any]:
     """min / max / soft_max keywords of a number property (and a precision that shows small weights)."""
-    limits = {key: kind(value) for key, value in (("min", meta.min), ("max", meta.max), ("soft_max", meta.soft_max))
-              if value is not None}
+    limits = {
+        key: kind(value)
+        for key, value in (("min", meta.min), ("max", meta.max), ("soft_max", meta.soft_max))
+        if value is not None
+    }
     if kind is float:
         limits["precision"] = 4
     return limits
@@ -79,7 +85,7 @@ def _value(value: Any, meta: Setting, kind: type) -> Any:
 def apply_preset(owner: Any, name: str) -> None:
     """Write preset ``name``'s values into the scene settings ``owner``."""
     values = PRESETS[name]
-    for setting, meta, kind in user_settings(IN_SCENE):
+    for setting, _meta, kind in user_settings(IN_SCENE):
         value = getattr(values, setting)
         setattr(owner, setting, "" if value is None and kind is str else value)
 

@@ -1,8 +1,9 @@
 """Registering groups of submodules in order and unregistering them in reverse, even after a failure."""
+
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from types import ModuleType
-from typing import Callable, Sequence
 
 
 class ModuleGroup:

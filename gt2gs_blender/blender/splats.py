@@ -18,6 +18,7 @@ property ``gt2gs_ply`` of the PointCloud data, so an unchanged object exports by
 The PLY is in the object's local space; exporting may bake the object's world transform.
 Nothing here loops over points in Python.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -89,8 +90,9 @@ def scene_to_object(
     for prop in columns:
         attr = attribute_name_for(prop)
         if len(attr.encode("utf-8")) > MAX_ATTRIBUTE_NAME:
-            raise SplatObjectError(f"PLY property name {prop!r} is longer than Blender's attribute names "
-                                   f"({MAX_ATTRIBUTE_NAME} bytes)")
+            raise SplatObjectError(
+                f"PLY property name {prop!r} is longer than Blender's attribute names ({MAX_ATTRIBUTE_NAME} bytes)"
+            )
     n = len(scene)
     created: list[bpy.types.ID] = []
     try:
@@ -199,8 +201,9 @@ def display_radii(log_scales: np.ndarray, means: np.ndarray) -> np.ndarray:
 
 def _convert_to_point_cloud(obj: bpy.types.Object) -> None:
     """Mesh object -> point-cloud object in place (bpy cannot size a PointCloud before Blender 5.1)."""
-    with bpy.context.temp_override(active_object=obj, object=obj, selected_objects=[obj],
-                                   selected_editable_objects=[obj]):
+    with bpy.context.temp_override(
+        active_object=obj, object=obj, selected_objects=[obj], selected_editable_objects=[obj]
+    ):
         result = bpy.ops.object.convert(target="POINTCLOUD")
     if result != {"FINISHED"} or obj.type != "POINTCLOUD":
         raise SplatObjectError(f"Blender could not convert the mesh to a point cloud ({result})")
@@ -286,8 +289,14 @@ def splat_summary(obj) -> SplatSummary | None:
     k = _rest_per_channel(cloud.attributes)
     degree = inria.sh_degree_from_rest(k) if k is not None else -1
     extras = tuple(prop for prop, _ in _export_properties(cloud, meta, k or 0)[2])
-    return SplatSummary(name=obj.name, count=len(cloud.points), sh_degree=degree, extras=extras,
-                        source=meta.get("source"), format=meta.get("format"))
+    return SplatSummary(
+        name=obj.name,
+        count=len(cloud.points),
+        sh_degree=degree,
+        extras=extras,
+        source=meta.get("source"),
+        format=meta.get("format"),
+    )
 
 
 def object_to_scene(obj, *, bake_transform: bool = False) -> tuple[SplatArrays, list[str]]:
@@ -297,13 +306,17 @@ def object_to_scene(obj, *, bake_transform: bool = False) -> tuple[SplatArrays, 
     otherwise they stay in the object's local space, exactly as stored.
     """
     if not is_splat_object(obj):
-        raise SplatObjectError(f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "
-                               f"(needs the attributes {', '.join(REQUIRED)})")
+        raise SplatObjectError(
+            f"{obj.name if obj else 'None'!r} is not a Gaussian splat point cloud "
+            f"(needs the attributes {', '.join(REQUIRED)})"
+        )
     cloud = obj.data
     k = _rest_per_channel(cloud.attributes)
     if k is None:
-        raise SplatObjectError(f"{obj.name!r}: the f_rest_* attributes do not form an SH degree 0-3 set "
-                               "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
+        raise SplatObjectError(
+            f"{obj.name!r}: the f_rest_* attributes do not form an SH degree 0-3 set "
+            "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)"
+        )
     layout, notes, extras_props = _export_properties(cloud, get_meta(cloud), k)
     n = len(cloud.points)
     scene = SplatArrays(
@@ -378,10 +391,9 @@ def _export_properties(cloud, meta: dict, k: int) -> tuple[list | None, list[str
             extras.append((prop, code))
     for attr in attributes:
         name = attr.name
-        if (attr.domain != "POINT" or attr.data_type not in ("FLOAT", "INT") or name.startswith(".")
-                or name in RESERVED):
+        if attr.domain != "POINT" or attr.data_type not in ("FLOAT", "INT") or name.startswith(".") or name in RESERVED:
             continue
-        prop = name[len(RENAME_PREFIX):] if name.startswith(RENAME_PREFIX) else name
+        prop = name[len(RENAME_PREFIX) :] if name.startswith(RENAME_PREFIX) else name
         if prop in listed or prop in core or prop.startswith(REST_PREFIX):
             continue
         extras.append((prop, "f4" if attr.data_type == "FLOAT" else "i4"))
@@ -405,8 +417,9 @@ def _read_extra(attributes, prop: str, code: str, n: int) -> np.ndarray:
 
 def _rest_per_channel(attributes) -> int | None:
     """K (f_rest per channel) from the f_rest_* attributes; None if they are not a full SH set."""
-    return inria.rest_per_channel(a.name for a in attributes if a.name.startswith(REST_PREFIX)
-                                  and a.domain == "POINT" and a.data_type == "FLOAT")
+    return inria.rest_per_channel(
+        a.name for a in attributes if a.name.startswith(REST_PREFIX) and a.domain == "POINT" and a.data_type == "FLOAT"
+    )
 
 
 def _point_attribute(attributes, name: str):
@@ -437,8 +450,10 @@ def get_meta(cloud) -> dict:
     if not isinstance(meta, dict):
         return {}
     layout = meta.get("layout")
-    if layout is not None and not (isinstance(layout, list) and all(
-            isinstance(e, list) and len(e) == 2 and all(isinstance(s, str) for s in e) for e in layout)):
+    if layout is not None and not (
+        isinstance(layout, list)
+        and all(isinstance(e, list) and len(e) == 2 and all(isinstance(s, str) for s in e) for e in layout)
+    ):
         meta["layout"] = None
     return meta
 
@@ -451,7 +466,9 @@ def _remove_ids(ids: list) -> None:
     for block in reversed(ids):
         with contextlib.suppress(KeyError, ReferenceError, RuntimeError):
             collection = {
-                bpy.types.Object: bpy.data.objects, bpy.types.Mesh: bpy.data.meshes,
-                bpy.types.PointCloud: bpy.data.pointclouds, bpy.types.Material: bpy.data.materials,
+                bpy.types.Object: bpy.data.objects,
+                bpy.types.Mesh: bpy.data.meshes,
+                bpy.types.PointCloud: bpy.data.pointclouds,
+                bpy.types.Material: bpy.data.materials,
             }[type(block)]
             collection.remove(block)

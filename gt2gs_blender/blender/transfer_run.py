@@ -8,6 +8,7 @@ the headless operator in a loop, tests directly. One run of each kind at a time 
 preview replaces a running one, a second transfer is refused); the panel reads them and how the
 last run of each kind ended (``OUTCOMES``).
 """
+
 from __future__ import annotations
 
 import json
@@ -45,7 +46,7 @@ class Outcome:
     seconds: float = 0.0
 
 
-ACTIVE: dict[str, "TransferRun"] = {}
+ACTIVE: dict[str, TransferRun] = {}
 OUTCOMES: dict[str, Outcome] = {}
 _previews: dict[str, Any] = {}
 
@@ -194,7 +195,7 @@ class TransferRun:
     started: float = field(default_factory=time.monotonic)
 
     @classmethod
-    def start(cls, context, overrides: dict[str, Any] | None = None, kind: str = "transfer") -> "TransferRun":
+    def start(cls, context, overrides: dict[str, Any] | None = None, kind: str = "transfer") -> TransferRun:
         """Export the target and start the worker; RunError (nothing started, nothing left) when it cannot."""
         overrides = overrides or {}
         if kind == "transfer" and kind in ACTIVE:
@@ -214,10 +215,16 @@ class TransferRun:
             write_ply(job.path("input.ply"), scene)
             preset, config = config_overrides(context, overrides)
             spec: dict[str, Any] = {
-                "kind": kind, "input": "input.ply", "texture": texture_spec(context, job, overrides.get("texture_path")),
-                "views": view_spec(context, obj, job, overrides), "preset": preset, "config": config,
-                "output": "result.ply" if kind == "transfer" else "orientation.png", "report": "report.json",
-                "input_name": f"object {obj.name!r}", "views_name": views_label(settings),
+                "kind": kind,
+                "input": "input.ply",
+                "texture": texture_spec(context, job, overrides.get("texture_path")),
+                "views": view_spec(context, obj, job, overrides),
+                "preset": preset,
+                "config": config,
+                "output": "result.ply" if kind == "transfer" else "orientation.png",
+                "report": "report.json",
+                "input_name": f"object {obj.name!r}",
+                "views_name": views_label(settings),
             }
             if kind == "transfer" and settings.region_only:
                 np.save(job.path("region.npy"), selected_points(obj))
@@ -277,8 +284,13 @@ def apply_result(context, object_name: str, path: str, mode: str):
         raise RunError(f"the object {object_name!r} is gone; the result was not applied")
     collection = source.users_collection[0] if source.users_collection else context.scene.collection
     arrays = read_ply_arrays(path)
-    made = splats.scene_to_object(arrays, source.name + RESULT_SUFFIX, collection, source_format="binary_little_endian",
-                                  with_material=bool(source.data.materials))
+    made = splats.scene_to_object(
+        arrays,
+        source.name + RESULT_SUFFIX,
+        collection,
+        source_format="binary_little_endian",
+        with_material=bool(source.data.materials),
+    )
     if mode == "NEW":
         made.matrix_world = source.matrix_world.copy()
         for obj in context.view_layer.objects.selected:

@@ -17,6 +17,7 @@ fitted on fixed sample directions with the same real-SH basis the rasterizer eva
 
 Normals (``nx, ny, nz``) turn with Q for a similarity and with A⁻ᵀ (keeping their length) otherwise.
 """
+
 from __future__ import annotations
 
 from dataclasses import replace
@@ -32,14 +33,23 @@ if TYPE_CHECKING:
 
 _SH_C1 = 0.4886025119029199
 _SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-_SH_C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-          -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
+_SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
 
 SIMILARITY_TOLERANCE = 1e-6
 """Relative deviation of AᵀA from s²·I below which A counts as a similarity."""
 
-GENERAL_NOTE = ("the transform has a non-uniform scale, shear or mirror: covariances were baked "
-                "exactly, view-dependent colour (SH) was turned by the transform's rotation part")
+GENERAL_NOTE = (
+    "the transform has a non-uniform scale, shear or mirror: covariances were baked "
+    "exactly, view-dependent colour (SH) was turned by the transform's rotation part"
+)
 
 
 class TransformError(ValueError):
@@ -103,8 +113,9 @@ def _affine_parts(matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return linear, offset
 
 
-def _turned_normals(extras: dict[str, np.ndarray], linear: np.ndarray,
-                    rotation: np.ndarray | None) -> dict[str, np.ndarray]:
+def _turned_normals(
+    extras: dict[str, np.ndarray], linear: np.ndarray, rotation: np.ndarray | None
+) -> dict[str, np.ndarray]:
     """``extras`` with float normals (nx, ny, nz) turned by ``rotation``, or by A⁻ᵀ keeping their length."""
     if not all(p in extras and extras[p].dtype.kind == "f" for p in NORMAL_NAMES):
         return extras
@@ -147,20 +158,28 @@ def quats_from_matrices(mats: np.ndarray) -> np.ndarray:
         r = m[sel]
         if case == 0:
             t = np.sqrt(1.0 + trace[sel]) * 2
-            q[sel] = np.stack([0.25 * t, (r[:, 2, 1] - r[:, 1, 2]) / t,
-                               (r[:, 0, 2] - r[:, 2, 0]) / t, (r[:, 1, 0] - r[:, 0, 1]) / t], axis=1)
+            q[sel] = np.stack(
+                [0.25 * t, (r[:, 2, 1] - r[:, 1, 2]) / t, (r[:, 0, 2] - r[:, 2, 0]) / t, (r[:, 1, 0] - r[:, 0, 1]) / t],
+                axis=1,
+            )
         elif case == 1:
             t = np.sqrt(1.0 + r[:, 0, 0] - r[:, 1, 1] - r[:, 2, 2]) * 2
-            q[sel] = np.stack([(r[:, 2, 1] - r[:, 1, 2]) / t, 0.25 * t,
-                               (r[:, 0, 1] + r[:, 1, 0]) / t, (r[:, 0, 2] + r[:, 2, 0]) / t], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 2, 1] - r[:, 1, 2]) / t, 0.25 * t, (r[:, 0, 1] + r[:, 1, 0]) / t, (r[:, 0, 2] + r[:, 2, 0]) / t],
+                axis=1,
+            )
         elif case == 2:
             t = np.sqrt(1.0 + r[:, 1, 1] - r[:, 0, 0] - r[:, 2, 2]) * 2
-            q[sel] = np.stack([(r[:, 0, 2] - r[:, 2, 0]) / t, (r[:, 0, 1] + r[:, 1, 0]) / t,
-                               0.25 * t, (r[:, 1, 2] + r[:, 2, 1]) / t], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 0, 2] - r[:, 2, 0]) / t, (r[:, 0, 1] + r[:, 1, 0]) / t, 0.25 * t, (r[:, 1, 2] + r[:, 2, 1]) / t],
+                axis=1,
+            )
         else:
             t = np.sqrt(1.0 + r[:, 2, 2] - r[:, 0, 0] - r[:, 1, 1]) * 2
-            q[sel] = np.stack([(r[:, 1, 0] - r[:, 0, 1]) / t, (r[:, 0, 2] + r[:, 2, 0]) / t,
-                               (r[:, 1, 2] + r[:, 2, 1]) / t, 0.25 * t], axis=1)
+            q[sel] = np.stack(
+                [(r[:, 1, 0] - r[:, 0, 1]) / t, (r[:, 0, 2] + r[:, 2, 0]) / t, (r[:, 1, 2] + r[:, 2, 1]) / t, 0.25 * t],
+                axis=1,
+            )
     q[q[:, 0] < 0] *= -1.0
     return q / np.linalg.norm(q, axis=1, keepdims=True)
 
@@ -174,12 +193,15 @@ def _quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a ⊗ b of (N,4) or broadcastable (1,4) quaternions (w, x, y, z)."""
     aw, ax, ay, az = np.moveaxis(a, -1, 0)
     bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    ], axis=-1)
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
 
 
 def _nearest_rotation(a: np.ndarray) -> np.ndarray:
@@ -203,13 +225,18 @@ def sh_basis(dirs: np.ndarray, degree: int) -> np.ndarray:
         out += [-_SH_C1 * y, _SH_C1 * z, -_SH_C1 * x]
     if degree >= 2:
         xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        out += [_SH_C2[0] * xy, _SH_C2[1] * yz, _SH_C2[2] * (2 * zz - xx - yy), _SH_C2[3] * xz,
-                _SH_C2[4] * (xx - yy)]
+        out += [_SH_C2[0] * xy, _SH_C2[1] * yz, _SH_C2[2] * (2 * zz - xx - yy), _SH_C2[3] * xz, _SH_C2[4] * (xx - yy)]
     if degree >= 3:
         xx, yy, zz = x * x, y * y, z * z
-        out += [_SH_C3[0] * y * (3 * xx - yy), _SH_C3[1] * x * y * z, _SH_C3[2] * y * (4 * zz - xx - yy),
-                _SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy), _SH_C3[4] * x * (4 * zz - xx - yy),
-                _SH_C3[5] * z * (xx - yy), _SH_C3[6] * x * (xx - 3 * yy)]
+        out += [
+            _SH_C3[0] * y * (3 * xx - yy),
+            _SH_C3[1] * x * y * z,
+            _SH_C3[2] * y * (4 * zz - xx - yy),
+            _SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
+            _SH_C3[4] * x * (4 * zz - xx - yy),
+            _SH_C3[5] * z * (xx - yy),
+            _SH_C3[6] * x * (xx - 3 * yy),
+        ]
     return np.stack(out, axis=-1)
 
 
@@ -218,7 +245,7 @@ def _sample_directions(count: int = 64) -> np.ndarray:
     i = np.arange(count) + 0.5
     z = 1 - 2 * i / count
     r = np.sqrt(1 - z * z)
-    phi = np.pi * (1 + 5 ** 0.5) * i
+    phi = np.pi * (1 + 5**0.5) * i
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
 
 

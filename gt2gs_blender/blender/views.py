@@ -1,16 +1,18 @@
 """Blender cameras as 3DGS ``cameras.json`` entries in a splat object's own (PLY) space.
 
-Blender cameras look down -z with y up; ``core`` uses OpenCV axes, so the camera-to-world rotation
-is ``R_cv = R_blender @ diag(1, -1, -1)`` (docs/architecture.md, "Conventions"). The PLY lives in the object's local space, so
-each camera is expressed relative to the object: ``inverse(object.matrix_world) @ camera.matrix_world``,
-with the scale taken out of the rotation (exact for uniform object scale; a non-uniform scale
-makes the views approximate). Intrinsics follow Blender's sensor fit, lens shift and the scene's
-render resolution.
+Blender cameras look down -z with y up; ``core`` uses OpenCV axes, so the camera-to-world rotation is ``R_cv
+= R_blender @ diag(1, -1, -1)`` (docs/architecture.md, "Conventions"). The PLY lives in the object's local
+space, so each camera is expressed relative to the object: ``inverse(object.matrix_world) @
+camera.matrix_world``, with the scale taken out of the rotation (exact for uniform object scale; a
+non-uniform scale makes the views approximate). Intrinsics follow Blender's sensor fit, lens shift and the
+scene's render resolution.
 """
+
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -28,8 +30,16 @@ def render_size(scene) -> tuple[int, int]:
     return max(1, round(render.resolution_x * scale)), max(1, round(render.resolution_y * scale))
 
 
-def intrinsics(lens: float, sensor_width: float, sensor_height: float, sensor_fit: str, shift_x: float,
-               shift_y: float, width: int, height: int) -> tuple[float, float, float, float]:
+def intrinsics(
+    lens: float,
+    sensor_width: float,
+    sensor_height: float,
+    sensor_fit: str,
+    shift_x: float,
+    shift_y: float,
+    width: int,
+    height: int,
+) -> tuple[float, float, float, float]:
     """(fx, fy, cx, cy) in pixels for a Blender perspective camera (square pixels)."""
     if sensor_fit == "HORIZONTAL" or (sensor_fit == "AUTO" and width >= height):
         focal = lens / sensor_width * width
@@ -62,13 +72,25 @@ def camera_entries(cameras: Iterable[Any], scene, object_to_world: np.ndarray) -
         if data.type != "PERSP":
             raise ViewError(f"camera {obj.name!r} is {data.type.lower()}; only perspective cameras can be views")
         position, rotation = camera_pose(np.array(obj.matrix_world), object_to_world)
-        fx, fy, cx, cy = intrinsics(data.lens, data.sensor_width, data.sensor_height, data.sensor_fit,
-                                    data.shift_x, data.shift_y, width, height)
+        fx, fy, cx, cy = intrinsics(
+            data.lens, data.sensor_width, data.sensor_height, data.sensor_fit, data.shift_x, data.shift_y, width, height
+        )
         if not all(math.isfinite(v) and v > 0 for v in (fx, fy)):
             raise ViewError(f"camera {obj.name!r} has an unusable focal length")
-        entries.append({"id": len(entries), "img_name": obj.name, "width": width, "height": height,
-                        "position": position.tolist(), "rotation": rotation.tolist(), "fx": fx, "fy": fy,
-                        "cx": cx, "cy": cy})
+        entries.append(
+            {
+                "id": len(entries),
+                "img_name": obj.name,
+                "width": width,
+                "height": height,
+                "position": position.tolist(),
+                "rotation": rotation.tolist(),
+                "fx": fx,
+                "fy": fy,
+                "cx": cx,
+                "cy": cy,
+            }
+        )
     if not entries:
         raise ViewError("no cameras to use as views")
     return entries

@@ -1,10 +1,11 @@
 """Atomic file output: write beside the target, then rename over it, so readers never see half a file."""
+
 from __future__ import annotations
 
 import os
 import secrets
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 
 def atomic_write(path: str | os.PathLike, chunks: Iterable[bytes | memoryview] | bytes | str) -> None:

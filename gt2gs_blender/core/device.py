@@ -1,8 +1,12 @@
 """Where the engine runs: the torch device asked for, and the CPU thread count for a block."""
+
 from __future__ import annotations
+
 import contextlib
 from collections.abc import Iterator
+
 import torch
+
 from .errors import GT2GSError
 
 

@@ -1,4 +1,5 @@
 """Error types shown to users as one readable line (CLI, Blender reports)."""
+
 from __future__ import annotations
 
 import os
@@ -38,8 +39,10 @@ def out_of_memory_message(exc: BaseException) -> str | None:
     """The user's line when ``exc`` is a failed allocation (MemoryError, or torch's RuntimeError from
     its CPU or GPU allocator, which is not a MemoryError), with the size asked for; None otherwise."""
     text = str(exc)
-    if not (isinstance(exc, MemoryError)
-            or (isinstance(exc, RuntimeError) and any(words in text for words in _ALLOCATION_FAILURES))):
+    if not (
+        isinstance(exc, MemoryError)
+        or (isinstance(exc, RuntimeError) and any(words in text for words in _ALLOCATION_FAILURES))
+    ):
         return None
     request = _REQUEST.search(text)
     if request is None:
@@ -47,6 +50,11 @@ def out_of_memory_message(exc: BaseException) -> str | None:
     amount, unit = request.groups()
     if unit.lower() == "bytes":
         n = float(amount)
-        amount, unit = (f"{n / 2**30:.1f}", "GiB") if n >= 2**30 else (f"{n / 2**20:.0f}", "MiB") if n >= 2**20 \
+        amount, unit = (
+            (f"{n / 2**30:.1f}", "GiB")
+            if n >= 2**30
+            else (f"{n / 2**20:.0f}", "MiB")
+            if n >= 2**20
             else (f"{n:,.0f}", "bytes")
+        )
     return f"ran out of memory (an allocation of {amount} {unit} failed): {MEMORY_ADVICE}"

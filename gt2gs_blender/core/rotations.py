@@ -1,6 +1,7 @@
 """Quaternion (w, x, y, z) -> rotation matrix in numpy, for INRIA's ``rot_0..3`` and COLMAP's ``qvec``
 alike: one conversion for the COLMAP reader and the Blender edge (numpy only, no torch; the engine's
 differentiable twin is ``scene.gaussians.quats_to_rotmats``)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -16,9 +17,17 @@ def quats_to_matrices(quats: np.ndarray) -> np.ndarray:
     ok = norm > DEGENERATE_NORM
     q = np.where(ok, q / np.where(ok, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack([
-        1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-        2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-        2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
-    ], axis=-1).reshape((*q.shape[:-1], 3, 3))
-
+    return np.stack(
+        [
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
+        ],
+        axis=-1,
+    ).reshape((*q.shape[:-1], 3, 3))

@@ -4,6 +4,7 @@ Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (bot
 ``gt2gs.transfer_texture`` and ``gt2gs.preview_orientation`` (``texture_path``, ``preset``, ``angle``,
 ``n_views`` override the panel's settings).
 """
+
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup

@@ -3,6 +3,7 @@
 Runs pip in a subprocess polled by a timer, so Blender stays responsive during the download. Only
 when Blender allows online access (the manifest declares the network permission).
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -12,8 +13,8 @@ import tempfile
 
 import bpy
 
-from ..blender import addon
 from ..app import deps
+from ..blender import addon
 
 POLL_S = 0.5
 
@@ -56,8 +57,9 @@ class GT2GS_OT_install_dependencies(bpy.types.Operator):
         return {"RUNNING_MODAL"}
 
     def _next(self) -> None:
-        self._process = subprocess.Popen(self._commands.pop(0), stdin=subprocess.DEVNULL, stdout=self._log,
-                                         stderr=subprocess.STDOUT)
+        self._process = subprocess.Popen(
+            self._commands.pop(0), stdin=subprocess.DEVNULL, stdout=self._log, stderr=subprocess.STDOUT
+        )
 
     def modal(self, context, event):
         if event.type != "TIMER" or self._process.poll() is None:

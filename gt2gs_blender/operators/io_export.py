@@ -1,4 +1,5 @@
 """File ▸ Export ▸ Gaussian Splat (.ply): the active splat object back to an INRIA PLY file."""
+
 from __future__ import annotations
 
 import os
@@ -40,7 +41,7 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
     bake_transform: BoolProperty(
         name="Apply Object Transform",
         description="Bake the object's location, rotation and scale into the splats (positions, rotations, "
-                    "scales and view-dependent colour); off writes them in the object's own space",
+        "scales and view-dependent colour); off writes them in the object's own space",
         default=False,
     )
     ply_format: EnumProperty(

@@ -1,4 +1,5 @@
 """File ▸ Import ▸ Gaussian Splat (.ply), and drag-and-drop of .ply files into the 3D viewport."""
+
 from __future__ import annotations
 
 import os
@@ -14,8 +15,10 @@ from ..blender.registration import ClassesWithMenu
 
 def engine_missing_message(exc: ImportError) -> str:
     """One line for a user whose Blender lacks the engine's Python packages (torch is not bundled)."""
-    return (f"GT² needs its Python dependencies to read and write splat files ({exc.name or exc} is not "
-            "installed in Blender's Python)")
+    return (
+        f"GT² needs its Python dependencies to read and write splat files ({exc.name or exc} is not "
+        "installed in Blender's Python)"
+    )
 
 
 class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
@@ -32,8 +35,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
 
     drop_invalid: BoolProperty(
         name="Drop Invalid Splats",
-        description="Load files with NaN/Inf parameters by leaving those splats out (otherwise such a file "
-                    "is refused)",
+        description="Load files with NaN/Inf parameters by leaving those splats out (otherwise such a file is refused)",
         default=False,
     )
     add_material: BoolProperty(
@@ -78,9 +80,16 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
                     warnings.simplefilter("always")
                     scene = read_ply_arrays(path, drop_invalid=self.drop_invalid)
                 notes.extend(str(w.message) for w in caught)
-                created.append(splats.scene_to_object(
-                    scene, object_name_for(path), collection, source_path=path, source_format=header.format,
-                    with_material=self.add_material))
+                created.append(
+                    splats.scene_to_object(
+                        scene,
+                        object_name_for(path),
+                        collection,
+                        source_path=path,
+                        source_format=header.format,
+                        with_material=self.add_material,
+                    )
+                )
         except (GT2GSError, splats.SplatObjectError) as exc:
             undo_partial_import()
             self.report({"ERROR"}, str(exc))

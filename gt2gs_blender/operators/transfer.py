@@ -6,6 +6,7 @@ is modal, polled on a window-manager timer, *Esc* or *Cancel* stop it; executed 
 ``n_views`` (automatic views) override the panel's settings when given, so a script needs one line:
 ``bpy.ops.gt2gs.transfer_texture(texture_path="wood.jpg", preset="preview")``.
 """
+
 from __future__ import annotations
 
 import time
@@ -15,7 +16,7 @@ from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ..blender import transfer_run
 from ..blender.job import DONE
-from ..core.transfer.config import PRESETS
+from ..core.transfer.presets import PRESETS
 
 TIMER_S = 0.25
 HEADLESS_TICK_S = 0.1
@@ -24,19 +25,37 @@ HEADLESS_TICK_S = 0.1
 class RunOverrides:
     """Keyword properties that override the panel's settings when a script sets them."""
 
-    texture_path: StringProperty(name="Texture", subtype="FILE_PATH", options={"SKIP_SAVE"},
-                                 description="Texture file (default: the panel's texture)")
-    preset: StringProperty(name="Preset", options={"SKIP_SAVE"},
-                           description=f"One of {', '.join(PRESETS)} (default: the panel's preset)")
-    angle: FloatProperty(name="Orientation", options={"SKIP_SAVE"}, min=-360.0, max=360.0,
-                         description="Texture angle in the first view, degrees (default: the panel's)")
-    n_views: IntProperty(name="Views", options={"SKIP_SAVE"}, min=1, max=512,
-                         description="Use this many automatic views (default: the panel's views)")
+    texture_path: StringProperty(
+        name="Texture",
+        subtype="FILE_PATH",
+        options={"SKIP_SAVE"},
+        description="Texture file (default: the panel's texture)",
+    )
+    preset: StringProperty(
+        name="Preset", options={"SKIP_SAVE"}, description=f"One of {', '.join(PRESETS)} (default: the panel's preset)"
+    )
+    angle: FloatProperty(
+        name="Orientation",
+        options={"SKIP_SAVE"},
+        min=-360.0,
+        max=360.0,
+        description="Texture angle in the first view, degrees (default: the panel's)",
+    )
+    n_views: IntProperty(
+        name="Views",
+        options={"SKIP_SAVE"},
+        min=1,
+        max=512,
+        description="Use this many automatic views (default: the panel's views)",
+    )
 
     def overrides(self) -> dict:
         """The properties the caller set, by the names ``TransferRun.start`` takes."""
-        return {name: getattr(self, name) for name in ("texture_path", "preset", "angle", "n_views")
-                if self.properties.is_property_set(name)}
+        return {
+            name: getattr(self, name)
+            for name in ("texture_path", "preset", "angle", "n_views")
+            if self.properties.is_property_set(name)
+        }
 
     def check_preset(self) -> str | None:
         if self.properties.is_property_set("preset") and self.preset not in PRESETS:
@@ -63,8 +82,11 @@ def _start(op, context, kind: str) -> transfer_run.TransferRun | None:
         op.report({"ERROR"}, str(exc))
         return None
     except ImportError as exc:
-        op.report({"ERROR"}, f"GT² needs its Python dependencies ({exc.name or exc} is missing): install them "
-                             "in the extension's preferences")
+        op.report(
+            {"ERROR"},
+            f"GT² needs its Python dependencies ({exc.name or exc} is missing): install them "
+            "in the extension's preferences",
+        )
         return None
 
 

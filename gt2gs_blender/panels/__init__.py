@@ -1,4 +1,5 @@
 """Blender UI: the scene's GT² settings, the GT² tab in the 3D View sidebar, the preferences."""
+
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup

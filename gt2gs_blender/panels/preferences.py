@@ -1,13 +1,14 @@
 """The extension's preferences: dependency status and install, and the machine settings (device, threads,
 weights, rasterizer, caches) generated from the transfer settings' metadata."""
+
 from __future__ import annotations
 
 import bpy
 from bpy.props import EnumProperty
 
+from ..app import deps
 from ..blender import addon, properties
 from ..core.transfer.config import IN_PREFERENCES, user_settings
-from ..app import deps
 from ..operators import dependencies
 
 
@@ -28,9 +29,13 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
     bl_idname = addon.ADDON_ID
     __annotations__ = {
         "build": EnumProperty(
-            name="Torch Build", default="CPU",
-            items=(("CPU", "CPU", "The CPU-only torch (smaller download, any machine)"),
-                   ("CUDA", "CUDA", "torch for NVIDIA GPUs (CUDA 12.8, a large download)"))),
+            name="Torch Build",
+            default="CPU",
+            items=(
+                ("CPU", "CPU", "The CPU-only torch (smaller download, any machine)"),
+                ("CUDA", "CUDA", "torch for NVIDIA GPUs (CUDA 12.8, a large download)"),
+            ),
+        ),
         **properties.annotations(IN_PREFERENCES),
     }
 

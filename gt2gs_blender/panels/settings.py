@@ -11,7 +11,8 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, PointerProperty, StringProperty
 
 from ..blender import properties, splats
-from ..core.transfer.config import DEFAULT_PRESET, IN_SCENE, PRESET_HELP, PRESETS
+from ..core.transfer.config import IN_SCENE
+from ..core.transfer.presets import DEFAULT_PRESET, PRESET_HELP, PRESETS
 
 PRESET_ITEMS = [(name, name.replace("-", " ").title(), PRESET_HELP[name]) for name in PRESETS]
 _applying_preset = False
@@ -39,44 +40,75 @@ def _preset_chosen(self, context) -> None:
 
 FRONT_END = {
     "target": PointerProperty(
-        name="Target", type=bpy.types.Object, poll=_is_splat,
-        description="The splat object to re-texture (empty: the active object)"),
+        name="Target",
+        type=bpy.types.Object,
+        poll=_is_splat,
+        description="The splat object to re-texture (empty: the active object)",
+    ),
     "texture_source": EnumProperty(
-        name="Texture", default="FILE",
-        items=(("FILE", "File", "A texture photograph on disk"),
-               ("IMAGE", "Image", "An image datablock of this file"))),
-    "texture_path": StringProperty(name="Texture File", subtype="FILE_PATH",
-                                   description="The texture photograph to transfer"),
-    "texture_image": PointerProperty(name="Texture Image", type=bpy.types.Image,
-                                     description="The image datablock to transfer"),
+        name="Texture",
+        default="FILE",
+        items=(("FILE", "File", "A texture photograph on disk"), ("IMAGE", "Image", "An image datablock of this file")),
+    ),
+    "texture_path": StringProperty(
+        name="Texture File", subtype="FILE_PATH", description="The texture photograph to transfer"
+    ),
+    "texture_image": PointerProperty(
+        name="Texture Image", type=bpy.types.Image, description="The image datablock to transfer"
+    ),
     "view_source": EnumProperty(
-        name="Views", default="AUTO",
-        items=(("AUTO", "Automatic", "Views generated around the object"),
-               ("SCENE_CAMERAS", "Scene Cameras", "Every perspective camera of the scene, by name"),
-               ("COLLECTION", "Camera Collection", "The cameras in a collection, by name"),
-               ("CAMERAS_JSON", "cameras.json", "The cameras.json written by the 3DGS trainer"))),
+        name="Views",
+        default="AUTO",
+        items=(
+            ("AUTO", "Automatic", "Views generated around the object"),
+            ("SCENE_CAMERAS", "Scene Cameras", "Every perspective camera of the scene, by name"),
+            ("COLLECTION", "Camera Collection", "The cameras in a collection, by name"),
+            ("CAMERAS_JSON", "cameras.json", "The cameras.json written by the 3DGS trainer"),
+        ),
+    ),
     "camera_collection": PointerProperty(name="Camera Collection", type=bpy.types.Collection),
-    "cameras_json": StringProperty(name="cameras.json", subtype="FILE_PATH",
-                                   description="cameras.json of the 3DGS scene (in the object's own space)"),
-    "preset": EnumProperty(name="Preset", items=PRESET_ITEMS, default=DEFAULT_PRESET, update=_preset_chosen,
-                           description="Sets every setting below to the preset's value"),
-    "auto_preview": BoolProperty(name="Live Orientation Preview", default=False,
-                                 description="Re-render the orientation preview whenever the angle or the texture "
-                                             "size changes"),
+    "cameras_json": StringProperty(
+        name="cameras.json",
+        subtype="FILE_PATH",
+        description="cameras.json of the 3DGS scene (in the object's own space)",
+    ),
+    "preset": EnumProperty(
+        name="Preset",
+        items=PRESET_ITEMS,
+        default=DEFAULT_PRESET,
+        update=_preset_chosen,
+        description="Sets every setting below to the preset's value",
+    ),
+    "auto_preview": BoolProperty(
+        name="Live Orientation Preview",
+        default=False,
+        description="Re-render the orientation preview whenever the angle or the texture size changes",
+    ),
     "result_mode": EnumProperty(
-        name="Result", default="NEW",
-        items=(("NEW", "New Object", "Add the re-textured splats as a new object beside the original"),
-               ("IN_PLACE", "In Place", "Replace the object's splats (undoable)"))),
-    "region_only": BoolProperty(name="Selected Points Only", default=False,
-                                description="Restyle only the points selected in Edit Mode"),
+        name="Result",
+        default="NEW",
+        items=(
+            ("NEW", "New Object", "Add the re-textured splats as a new object beside the original"),
+            ("IN_PLACE", "In Place", "Replace the object's splats (undoable)"),
+        ),
+    ),
+    "region_only": BoolProperty(
+        name="Selected Points Only", default=False, description="Restyle only the points selected in Edit Mode"
+    ),
 }
 """Properties of the Blender front end that are not transfer settings."""
 
-GT2GS_PG_settings = type("GT2GS_PG_settings", (bpy.types.PropertyGroup,), {
-    "__doc__": "The scene's texture-transfer settings",
-    "__annotations__": {**FRONT_END, **properties.annotations(
-        IN_SCENE, {"angle": _layout_changed, "texture_height": _layout_changed})},
-})
+GT2GS_PG_settings = type(
+    "GT2GS_PG_settings",
+    (bpy.types.PropertyGroup,),
+    {
+        "__doc__": "The scene's texture-transfer settings",
+        "__annotations__": {
+            **FRONT_END,
+            **properties.annotations(IN_SCENE, {"angle": _layout_changed, "texture_height": _layout_changed}),
+        },
+    },
+)
 
 classes = (GT2GS_PG_settings,)
 

@@ -2,6 +2,7 @@
 
 What the panel shows comes from ``splat_rows`` (tested without a UI); ``draw`` only lays it out.
 """
+
 from __future__ import annotations
 
 import os

@@ -3,6 +3,7 @@
 What it shows in each state (idle, running, done, error, cancelled) comes from ``transfer_view``, a
 plain function the tests check; ``draw`` only lays that out.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -15,8 +16,13 @@ from ..blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
 from ..core.transfer.config import IN_SCENE, PARTS, user_settings
 from .sidebar import CATEGORY
 
-STAGE_NAMES = {"starting": "Starting", "prepare": "Preparing views", "bank": "Texture bank",
-               "stylise": "Stylising", "finish": "Finishing"}
+STAGE_NAMES = {
+    "starting": "Starting",
+    "prepare": "Preparing views",
+    "bank": "Texture bank",
+    "stylise": "Stylising",
+    "finish": "Finishing",
+}
 ICONS = {IDLE: "INFO", RUNNING: "TIME", DONE: "CHECKMARK", ERROR: "ERROR", CANCELLED: "CANCEL"}
 
 
@@ -59,10 +65,13 @@ def report_rows(report: dict[str, Any] | None, result: str | None) -> list[tuple
     if not report:
         return [("Result", result)] if result else []
     width, height = report.get("image_size") or ("?", "?")
-    rows = [("Result", result or "-"), ("Time", f"{report.get('seconds', 0.0):.1f} s"),
-            ("Splats", f"{report.get('n_gaussians', 0):,}"),
-            ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
-            ("Device", str(report.get("device", "?")))]
+    rows = [
+        ("Result", result or "-"),
+        ("Time", f"{report.get('seconds', 0.0):.1f} s"),
+        ("Splats", f"{report.get('n_gaussians', 0):,}"),
+        ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
+        ("Device", str(report.get("device", "?"))),
+    ]
     weights = report.get("weights") or {}
     rows.append(("Features", ("FALLBACK: " if weights.get("fallback") else "") + str(weights.get("spec", "?"))))
     metrics = report.get("metrics") or {}
@@ -84,8 +93,11 @@ def transfer_view(target: str | None, running: JobStatus | None, last: transfer_
         message = f"Ready: {target}" if can else "Select a Gaussian splat object"
         return TransferView(IDLE, can, False, message, ICONS[IDLE])
     rows = report_rows(last.report, last.result) if last.state == DONE else []
-    message = {DONE: f"Done: {last.message}", CANCELLED: "Cancelled; the scene is unchanged",
-               ERROR: f"Failed: {last.message}"}.get(last.state, last.message)
+    message = {
+        DONE: f"Done: {last.message}",
+        CANCELLED: "Cancelled; the scene is unchanged",
+        ERROR: f"Failed: {last.message}",
+    }.get(last.state, last.message)
     return TransferView(last.state, can, False, message, ICONS.get(last.state, "INFO"), report_rows=rows)
 
 
@@ -93,8 +105,9 @@ def current_view(context) -> TransferView:
     """``transfer_view`` for the current context."""
     target = transfer_run.target_object(context)
     run = transfer_run.ACTIVE.get("transfer")
-    return transfer_view(target.name if target else None, run.job.status if run else None,
-                         transfer_run.OUTCOMES.get("transfer"))
+    return transfer_view(
+        target.name if target else None, run.job.status if run else None, transfer_run.OUTCOMES.get("transfer")
+    )
 
 
 class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
@@ -166,14 +179,27 @@ def part_panel(part: str, title: str) -> type:
         for name in names:
             column.prop(context.scene.gt2gs, name)
 
-    return type(f"VIEW3D_PT_gt2gs_{part}", (bpy.types.Panel,), {
-        "bl_space_type": "VIEW_3D", "bl_region_type": "UI", "bl_category": CATEGORY, "bl_label": title,
-        "bl_parent_id": "VIEW3D_PT_gt2gs_transfer", "bl_options": {"DEFAULT_CLOSED"}, "draw": draw,
-        "__doc__": f"The {title} settings of the texture transfer"})
+    return type(
+        f"VIEW3D_PT_gt2gs_{part}",
+        (bpy.types.Panel,),
+        {
+            "bl_space_type": "VIEW_3D",
+            "bl_region_type": "UI",
+            "bl_category": CATEGORY,
+            "bl_label": title,
+            "bl_parent_id": "VIEW3D_PT_gt2gs_transfer",
+            "bl_options": {"DEFAULT_CLOSED"},
+            "draw": draw,
+            "__doc__": f"The {title} settings of the texture transfer",
+        },
+    )
 
 
-PART_PANELS = tuple(part_panel(part, title) for part, title in PARTS.items()
-                    if any(meta.part == part and name not in MAIN_SETTINGS for name, meta, _ in user_settings(IN_SCENE)))
+PART_PANELS = tuple(
+    part_panel(part, title)
+    for part, title in PARTS.items()
+    if any(meta.part == part and name not in MAIN_SETTINGS for name, meta, _ in user_settings(IN_SCENE))
+)
 
 classes = (VIEW3D_PT_gt2gs_transfer, *PART_PANELS)
 

@@ -8,6 +8,7 @@ starts from Blender's factory settings with an empty scene, as MolecularNodes' t
 and enabling the built extension zip runs in a subprocess (test_extension.py), so that its
 ``bl_ext.*`` copy never meets the source-tree registration in one process.
 """
+
 from __future__ import annotations
 
 from pathlib import Path

@@ -5,6 +5,7 @@ validates it and installs it into a local repository; a fresh Python process the
 repository to Blender's preferences, enables ``bl_ext.<repo>.gt2gs_blender``, uses the import
 operator and disables the extension again.
 """
+
 from __future__ import annotations
 
 import json
@@ -19,7 +20,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
-from .conftest import DONUT, DONUT_COUNT  # noqa: E402
+from .conftest import DONUT, DONUT_COUNT
 
 pytestmark = pytest.mark.blender
 
@@ -52,13 +53,25 @@ def built_zip(tmp_path_factory) -> Path:
 def test_build_ships_the_package_and_nothing_else(built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
     assert built_zip.name == "gt2gs_blender-0.1.0.zip"
-    for required in ("blender_manifest.toml", "__init__.py", "operators/io_import.py", "operators/io_export.py",
-                     "operators/transfer.py", "app/worker.py", "batch.py",
-                     "panels/sidebar.py", "blender/splats.py", "core/scene/ply.py",
-                     "core/render/csrc/raster_cpu.cpp"):  # the C++ source is compiled at run time
+    for required in (
+        "blender_manifest.toml",
+        "__init__.py",
+        "operators/io_import.py",
+        "operators/io_export.py",
+        "operators/transfer.py",
+        "app/worker.py",
+        "batch.py",
+        "panels/sidebar.py",
+        "blender/splats.py",
+        "core/scene/ply.py",
+        "core/render/csrc/raster_cpu.cpp",
+    ):  # the C++ source is compiled at run time
         assert required in names, required
-    leaked = [n for n in names if "__pycache__" in n or n.endswith((".pyc", ".o", ".so")) or
-              any(part.startswith(".") for part in n.split("/"))]
+    leaked = [
+        n
+        for n in names
+        if "__pycache__" in n or n.endswith((".pyc", ".o", ".so")) or any(part.startswith(".") for part in n.split("/"))
+    ]
     assert not leaked
 
 
@@ -81,9 +94,9 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
         addon_utils.enable(module, default_set=True, handle_error=None)
         report["enabled"] = module in bpy.context.preferences.addons
         report["loaded_from"] = sys.modules[module].__file__
-        report["operators"] = [hasattr(bpy.types, c) for c in
-                               ("GT2GS_OT_import_ply", "GT2GS_OT_export_ply", "GT2GS_FH_ply", "VIEW3D_PT_gt2gs_splat",
-                                "GT2GS_OT_transfer_texture", "GT2GS_OT_preview_orientation", "VIEW3D_PT_gt2gs_transfer")]
+        classes = ("GT2GS_OT_import_ply", "GT2GS_OT_export_ply", "GT2GS_FH_ply", "VIEW3D_PT_gt2gs_splat",
+                   "GT2GS_OT_transfer_texture", "GT2GS_OT_preview_orientation", "VIEW3D_PT_gt2gs_transfer")
+        report["operators"] = [hasattr(bpy.types, c) for c in classes]
         prefs = bpy.context.preferences.addons[module].preferences
         report["preferences"] = [prefs.device, prefs.threads]
         prefs.threads = 3  # the worker's CPU threads reach the job's config
@@ -111,11 +124,12 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
     """)
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))
     env.pop("PYTHONPATH", None)  # the installed copy, not the source tree, must provide the extension
-    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
-                            cwd=tmp_path, env=env)
+    result = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=120, cwd=tmp_path, env=env
+    )
     lines = [line for line in result.stdout.splitlines() if line.startswith("REPORT ")]
     assert result.returncode == 0 and lines, f"{result.stdout}\n{result.stderr}"
-    report = json.loads(lines[-1][len("REPORT "):])
+    report = json.loads(lines[-1][len("REPORT ") :])
 
     assert report["enabled"]
     assert Path(report["loaded_from"]).resolve() == (repo / "gt2gs_blender" / "__init__.py").resolve()

@@ -4,6 +4,7 @@ Oracles are independent of the code under test: PLY files are parsed and written
 and hand-written type codes; transforms are built from Euler angles with numpy; view-dependent
 colour is evaluated with the rasterizer's own SH code.
 """
+
 from __future__ import annotations
 
 import filecmp
@@ -19,17 +20,25 @@ import pytest
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 torch = pytest.importorskip("torch", exc_type=ModuleNotFoundError)
 
-from gt2gs_blender.blender import splats, transform  # noqa: E402
-from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
-from gt2gs_blender.core.render.sh import eval_sh, sh_basis  # noqa: E402
-from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats  # noqa: E402
+from gt2gs_blender.blender import splats, transform
+from gt2gs_blender.core.render.sh import eval_sh, sh_basis
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.scene.ply_write import write_ply
 
-from .conftest import DONUT_COUNT  # noqa: E402
+from .conftest import DONUT_COUNT
 
 pytestmark = pytest.mark.blender
 
-TYPE_CODES = {"char": "i1", "uchar": "u1", "short": "i2", "ushort": "u2", "int": "i4", "uint": "u4",
-              "float": "f4", "double": "f8"}
+TYPE_CODES = {
+    "char": "i1",
+    "uchar": "u1",
+    "short": "i2",
+    "ushort": "u2",
+    "int": "i4",
+    "uint": "u4",
+    "float": "f4",
+    "double": "f8",
+}
 C0 = 0.28209479177387814
 
 
@@ -67,20 +76,53 @@ def write_ply_numpy(path, props: list[tuple[str, str]], columns: dict[str, np.nd
     records = np.empty(n, [(name, order + TYPE_CODES[t]) for name, t in props])
     for name, _ in props:
         records[name] = columns[name]
-    header = "".join(["ply\n", f"format {fmt} 1.0\n", f"element vertex {n}\n",
-                      *(f"property {t} {name}\n" for name, t in props), "end_header\n"])
+    header = "".join(
+        [
+            "ply\n",
+            f"format {fmt} 1.0\n",
+            f"element vertex {n}\n",
+            *(f"property {t} {name}\n" for name, t in props),
+            "end_header\n",
+        ]
+    )
     Path(path).write_bytes(header.encode("ascii") + records.tobytes())
 
 
 def core_props(k: int) -> list[tuple[str, str]]:
-    names = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", *(f"f_rest_{i}" for i in range(3 * k)),
-             "opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    names = [
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        *(f"f_rest_{i}" for i in range(3 * k)),
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
     return [(name, "float") for name in names]
 
 
-EXTRAS = [("nx", "float"), ("ny", "float"), ("nz", "float"), ("red", "uchar"), ("seg", "short"),
-          ("count", "ushort"), ("tiny", "char"), ("label", "int"), ("flags", "uint"), ("conf", "double"),
-          ("radius", "float"), ("position", "float")]
+EXTRAS = [
+    ("nx", "float"),
+    ("ny", "float"),
+    ("nz", "float"),
+    ("red", "uchar"),
+    ("seg", "short"),
+    ("count", "ushort"),
+    ("tiny", "char"),
+    ("label", "int"),
+    ("flags", "uint"),
+    ("conf", "double"),
+    ("radius", "float"),
+    ("position", "float"),
+]
 """Normals and extra properties of every type, two of them named like Blender's own attributes."""
 
 
@@ -88,7 +130,7 @@ def sh3_columns(n: int, seed: int = 0) -> tuple[list[tuple[str, str]], dict[str,
     """A random SH3 scene with normals and extras, in a non-canonical property order."""
     rng = np.random.default_rng(seed)
     core = core_props(15)
-    props = core[:3] + [EXTRAS[9]] + core[3:10] + EXTRAS[:3] + core[10:] + EXTRAS[3:9] + EXTRAS[10:]
+    props = [*core[:3], EXTRAS[9], *core[3:10], *EXTRAS[:3], *core[10:], *EXTRAS[3:9], *EXTRAS[10:]]
     columns = {}
     for name, t in props:
         code = TYPE_CODES[t]
@@ -128,7 +170,7 @@ def datablock_counts(bpy_module) -> dict[str, int]:
     return {k: len(getattr(data, k)) for k in ("objects", "meshes", "pointclouds", "materials", "collections")}
 
 
-def import_file(path) -> "bpy.types.Object":
+def import_file(path) -> bpy.types.Object:
     assert bpy.ops.gt2gs.import_ply(filepath=str(path)) == {"FINISHED"}
     return bpy.context.active_object
 
@@ -171,7 +213,8 @@ def test_import_donut_has_every_property_as_an_attribute(fresh, donut):
         assert obj.data.attributes[name].data_type == "FLOAT" and obj.data.attributes[name].domain == "POINT"
         np.testing.assert_array_equal(attribute_values(obj, name), records[name], err_msg=name)
     assert {a.name for a in obj.data.attributes if not a.name.startswith(".")} == (
-        {n for n, _ in props} - {"x", "y", "z"} | {"position", "radius", "Col"})
+        {n for n, _ in props} - {"x", "y", "z"} | {"position", "radius", "Col"}
+    )
 
 
 def test_import_donut_colour_radius_and_material(fresh, donut):
@@ -268,9 +311,14 @@ def test_sh3_scene_with_normals_and_extras_round_trips(fresh, tmp_path, fmt):
             log_scales=torch.from_numpy(np.stack([columns[f"scale_{i}"] for i in range(3)], 1)),
             opacity_logits=torch.from_numpy(columns["opacity"]),
             sh_dc=torch.from_numpy(np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1)),
-            sh_rest=torch.from_numpy(np.ascontiguousarray(
-                np.stack([columns[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1))),
-            extras={name: columns[name] for name, _ in EXTRAS}, ply_layout=tuple(props))
+            sh_rest=torch.from_numpy(
+                np.ascontiguousarray(
+                    np.stack([columns[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
+                )
+            ),
+            extras={name: columns[name] for name, _ in EXTRAS},
+            ply_layout=tuple(props),
+        )
         write_ply(src, scene, fmt="ascii")
     else:
         write_ply_numpy(src, props, columns, fmt)
@@ -345,8 +393,9 @@ def test_export_bakes_translation_rotation_and_uniform_scale(fresh, tmp_path):
     rot = euler_xyz(*angles)
 
     means = np.stack([columns[c] for c in "xyz"], 1).astype(np.float64)
-    np.testing.assert_allclose(np.stack([baked[c] for c in "xyz"], 1), means @ (s * rot).T + location,
-                               rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(
+        np.stack([baked[c] for c in "xyz"], 1), means @ (s * rot).T + location, rtol=1e-5, atol=1e-5
+    )
     quats = np.stack([columns[f"rot_{i}"] for i in range(4)], 1)
     baked_quats = np.stack([baked[f"rot_{i}"] for i in range(4)], 1)
     np.testing.assert_allclose(rotmats(baked_quats), rot[None] @ rotmats(quats), atol=2e-6)
@@ -361,12 +410,32 @@ def test_export_bakes_translation_rotation_and_uniform_scale(fresh, tmp_path):
     # The view-dependent colour turned with the scene: seen along R·d after = along d before.
     dirs = np.random.default_rng(3).standard_normal((400, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    before = eval_sh(torch.from_numpy(np.concatenate(
-        [np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1)[:, None].astype(np.float64),
-         sh_rest_of(columns, 15)], axis=1)), torch.from_numpy(dirs), 3)
-    after = eval_sh(torch.from_numpy(np.concatenate(
-        [np.stack([baked[f"f_dc_{i}"] for i in range(3)], 1)[:, None].astype(np.float64),
-         sh_rest_of(baked, 15)], axis=1)), torch.from_numpy(dirs @ rot.T), 3)
+    before = eval_sh(
+        torch.from_numpy(
+            np.concatenate(
+                [
+                    np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1)[:, None].astype(np.float64),
+                    sh_rest_of(columns, 15),
+                ],
+                axis=1,
+            )
+        ),
+        torch.from_numpy(dirs),
+        3,
+    )
+    after = eval_sh(
+        torch.from_numpy(
+            np.concatenate(
+                [
+                    np.stack([baked[f"f_dc_{i}"] for i in range(3)], 1)[:, None].astype(np.float64),
+                    sh_rest_of(baked, 15),
+                ],
+                axis=1,
+            )
+        ),
+        torch.from_numpy(dirs @ rot.T),
+        3,
+    )
     np.testing.assert_allclose(after.numpy(), before.numpy(), atol=1e-5)
 
 
@@ -388,8 +457,9 @@ def test_baking_a_non_similarity_keeps_covariances_exact(fresh, tmp_path, scale)
         s2 = np.exp(2 * np.asarray(log_scales, np.float64))
         return r @ (s2[:, :, None] * r.transpose(0, 2, 1))
 
-    before = covariances(np.stack([columns[f"rot_{i}"] for i in range(4)], 1),
-                         np.stack([columns[f"scale_{i}"] for i in range(3)], 1))
+    before = covariances(
+        np.stack([columns[f"rot_{i}"] for i in range(4)], 1), np.stack([columns[f"scale_{i}"] for i in range(3)], 1)
+    )
     after = covariances(scene.quats, scene.log_scales)
     expected = linear[None] @ before @ linear.T[None]
     np.testing.assert_allclose(after, expected, rtol=1e-4, atol=1e-12 + 1e-5 * np.abs(expected).max())
@@ -400,8 +470,11 @@ def test_baking_a_non_similarity_keeps_covariances_exact(fresh, tmp_path, scale)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     dc = np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1)[:, None].astype(np.float64)
     before = eval_sh(torch.from_numpy(np.concatenate([dc, sh_rest_of(columns, 15)], 1)), torch.from_numpy(dirs), 3)
-    after = eval_sh(torch.from_numpy(np.concatenate([scene.sh_dc[:, None], scene.sh_rest], 1).astype(np.float64)),
-                    torch.from_numpy(dirs @ orth.T), 3)
+    after = eval_sh(
+        torch.from_numpy(np.concatenate([scene.sh_dc[:, None], scene.sh_rest], 1).astype(np.float64)),
+        torch.from_numpy(dirs @ orth.T),
+        3,
+    )
     np.testing.assert_allclose(after.numpy(), before.numpy(), atol=1e-5)
 
     normals = np.stack([columns[c] for c in ("nx", "ny", "nz")], 1).astype(np.float64)
@@ -435,14 +508,17 @@ def truncated_copy(donut: Path, tmp_path: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize("case,match", [
-    ("garbage", "not a PLY file"),
-    ("empty", "empty"),
-    ("truncated", "truncated"),
-    ("not_gaussian", "missing required properties"),
-    ("missing", "no such file"),
-    ("directory", "is a directory"),
-])
+@pytest.mark.parametrize(
+    "case,match",
+    [
+        ("garbage", "not a PLY file"),
+        ("empty", "empty"),
+        ("truncated", "truncated"),
+        ("not_gaussian", "missing required properties"),
+        ("missing", "no such file"),
+        ("directory", "is a directory"),
+    ],
+)
 def test_malformed_file_is_reported_and_creates_nothing(fresh, donut, tmp_path, case, match):
     path = tmp_path / f"{case}.ply"
     if case == "garbage":
@@ -452,8 +528,10 @@ def test_malformed_file_is_reported_and_creates_nothing(fresh, donut, tmp_path, 
     elif case == "truncated":
         path = truncated_copy(donut, tmp_path)
     elif case == "not_gaussian":
-        path.write_bytes(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
-                         b"property float z\nend_header\n0 0 0\n")
+        path.write_bytes(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+            b"property float z\nend_header\n0 0 0\n"
+        )
     elif case == "directory":
         path.mkdir()
     before = datablock_counts(bpy)
@@ -519,8 +597,13 @@ def test_sidebar_rows(fresh, donut):
     mesh_obj = bpy.data.objects.new("mesh", bpy.data.meshes.new("mesh"))
     assert sidebar.splat_rows(mesh_obj) is None
     obj = import_file(donut)
-    assert sidebar.splat_rows(obj) == [("Object", "donut"), ("Splats", "45,624"), ("SH Degree", "0"),
-                                       ("Extras", "none"), ("Source", "point_cloud.ply")]
+    assert sidebar.splat_rows(obj) == [
+        ("Object", "donut"),
+        ("Splats", "45,624"),
+        ("SH Degree", "0"),
+        ("Extras", "none"),
+        ("Source", "point_cloud.ply"),
+    ]
     obj.data.attributes.remove(obj.data.attributes["opacity"])
     assert sidebar.splat_rows(obj) is None
 
@@ -553,7 +636,12 @@ def test_import_and_export_work_without_torch(donut, tmp_path):
         f"assert bpy.ops.gt2gs.export_ply(filepath={str(out)!r}) == {{'FINISHED'}}\n"
         "assert 'torch' not in sys.modules or sys.modules['torch'] is None\n"
     )
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                          cwd=Path(__file__).resolve().parents[2])
+    proc = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=Path(__file__).resolve().parents[2],
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert out.read_bytes() == donut.read_bytes()

@@ -1,5 +1,6 @@
 """The transfer from Blender: operators through bpy.ops, the worker/poll cycle of the modal operator
 (driven by test ticks), cancel and crash, the panel's state function, preferences, views, batch script."""
+
 from __future__ import annotations
 
 import glob
@@ -16,18 +17,18 @@ import pytest
 
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
-from gt2gs_blender.blender import splats, transfer_run, views  # noqa: E402
-from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus  # noqa: E402
-from gt2gs_blender.app import deps  # noqa: E402
-from gt2gs_blender.core.cameras.cameras_json import load_cameras_json  # noqa: E402
-from gt2gs_blender.core.errors import MEMORY_ADVICE  # noqa: E402
-from gt2gs_blender.core.scene.ply_write import write_ply  # noqa: E402
-from gt2gs_blender.app.images import write_png  # noqa: E402
-from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view  # noqa: E402
+from gt2gs_blender.app import deps
+from gt2gs_blender.app.images import write_png
+from gt2gs_blender.blender import splats, transfer_run, views
+from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
+from gt2gs_blender.core.errors import MEMORY_ADVICE
+from gt2gs_blender.core.scene.ply_write import write_ply
+from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view
 
-from ..test_transfer import blob_scene, stripes  # noqa: E402
-from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit  # noqa: E402
-from .conftest import SHARED  # noqa: E402
+from ..test_transfer import blob_scene, stripes
+from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit
+from .conftest import SHARED
 
 pytestmark = pytest.mark.blender
 
@@ -60,8 +61,10 @@ def blob(fresh, inputs):
 
 def snapshot() -> dict:
     """Every object, point cloud and point attribute of the file (to prove a run left them as they were)."""
-    state = {"objects": sorted(o.name for o in bpy.data.objects),
-             "clouds": sorted(c.name for c in bpy.data.pointclouds)}
+    state = {
+        "objects": sorted(o.name for o in bpy.data.objects),
+        "clouds": sorted(c.name for c in bpy.data.pointclouds),
+    }
     for cloud in bpy.data.pointclouds:
         for attr in cloud.attributes:
             if attr.data_type == "FLOAT":
@@ -217,7 +220,7 @@ def test_region_uses_the_point_selection(blob):
     run.finish()
     result = bpy.data.objects[run.result_name]
     kept = np.flatnonzero(~mask)
-    assert np.array_equal(dc(result)[:len(kept)], dc(blob)[kept])  # unselected splats untouched
+    assert np.array_equal(dc(result)[: len(kept)], dc(blob)[kept])  # unselected splats untouched
 
 
 def test_preview_orientation_operator_fills_the_preview(blob):
@@ -272,8 +275,8 @@ def test_scene_cameras_become_views_in_object_space(fresh):
 
 
 def test_panel_settings_and_keywords_become_the_job_config(fresh):
-    from gt2gs_blender.core.transfer.config import PRESETS
-    from gt2gs_blender.core.transfer.config import preset as make_preset
+    from gt2gs_blender.core.transfer.presets import PRESETS
+    from gt2gs_blender.core.transfer.presets import preset as make_preset
 
     settings = fresh.context.scene.gt2gs
     preset, config = transfer_run.config_overrides(fresh.context, {})
@@ -297,13 +300,30 @@ def test_transfer_view_in_each_state():
     idle = transfer_view(None, None, None)
     assert (idle.state, idle.can_transfer, idle.can_cancel, idle.progress) == (IDLE, False, False, None)
     assert transfer_view("donut", None, None).can_transfer
-    running = transfer_view("donut", JobStatus(state=RUNNING, stage="stylise", step=12, total=40, fraction=0.45,
-                                               eta_s=65.2, message="stylise: texture loss 0.3"), None)
+    running = transfer_view(
+        "donut",
+        JobStatus(
+            state=RUNNING,
+            stage="stylise",
+            step=12,
+            total=40,
+            fraction=0.45,
+            eta_s=65.2,
+            message="stylise: texture loss 0.3",
+        ),
+        None,
+    )
     assert running.state == RUNNING and running.can_cancel and not running.can_transfer
     assert running.progress == 0.45 and running.progress_text == "Stylising 12/40 · 45% · ETA 1:05"
-    report = {"seconds": 12.34, "n_gaussians": 45624, "n_views": 8, "image_size": [128, 128], "device": "cpu",
-              "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
-              "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81}}
+    report = {
+        "seconds": 12.34,
+        "n_gaussians": 45624,
+        "n_views": 8,
+        "image_size": [128, 128],
+        "device": "cpu",
+        "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
+        "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81},
+    }
     done = transfer_view("donut", None, transfer_run.Outcome(DONE, "done in 12 s", report, "donut GT²"))
     rows = dict(done.report_rows)
     assert done.state == DONE and done.message == "Done: done in 12 s" and done.progress is None
@@ -333,14 +353,34 @@ def test_batch_script_runs_and_fails_readably(fresh, inputs, tmp_path, capsys):
     from gt2gs_blender import batch
 
     out = tmp_path / "out.ply"
-    code = batch.main(["--ply", str(inputs["ply"]), "--texture", str(inputs["texture"]), "--out", str(out),
-                       "--preset", "preview", "--views", "2", "--angle", "30"])
+    code = batch.main(
+        [
+            "--ply",
+            str(inputs["ply"]),
+            "--texture",
+            str(inputs["texture"]),
+            "--out",
+            str(out),
+            "--preset",
+            "preview",
+            "--views",
+            "2",
+            "--angle",
+            "30",
+        ]
+    )
     assert code == 0 and out.is_file()
-    assert batch.main(["--ply", str(tmp_path / "missing.ply"), "--texture", str(inputs["texture"]),
-                       "--out", str(out)]) == 1
+    assert (
+        batch.main(["--ply", str(tmp_path / "missing.ply"), "--texture", str(inputs["texture"]), "--out", str(out)])
+        == 1
+    )
     assert "gt2gs: error: " in capsys.readouterr().err
-    assert batch.main(["--ply", str(inputs["ply"]), "--texture", str(inputs["texture"]), "--out", str(out),
-                       "--preset", "ultra"]) == 1
+    assert (
+        batch.main(
+            ["--ply", str(inputs["ply"]), "--texture", str(inputs["texture"]), "--out", str(out), "--preset", "ultra"]
+        )
+        == 1
+    )
     assert "unknown preset 'ultra'" in capsys.readouterr().err
 
 

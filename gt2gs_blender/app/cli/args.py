@@ -1,7 +1,10 @@
 """Argument types and option groups shared by the commands."""
+
 from __future__ import annotations
+
 import argparse
 import math
+
 from ...core.render import BACKENDS
 
 
@@ -51,18 +54,32 @@ def _up(text: str) -> str | tuple[float, float, float]:
 
 def _scene_options() -> argparse.ArgumentParser:
     parent = argparse.ArgumentParser(add_help=False)
-    parent.add_argument("--drop-invalid", action="store_true",
-                        help="load files with NaN/Inf Gaussians by dropping those Gaussians")
+    parent.add_argument(
+        "--drop-invalid", action="store_true", help="load files with NaN/Inf Gaussians by dropping those Gaussians"
+    )
     return parent
 
 
 def _render_options() -> argparse.ArgumentParser:
     parent = argparse.ArgumentParser(add_help=False)
     group = parent.add_argument_group("rendering")
-    group.add_argument("--background", type=_color, default=(1.0, 1.0, 1.0), metavar="R,G,B",
-                       help="background colour, components in 0..1 (default: 1,1,1 = white)")
-    group.add_argument("--backend", choices=("auto", *BACKENDS), default="auto",
-                       help="rasterizer backend (default: auto = the fastest available)")
-    group.add_argument("--device", choices=("auto", "cpu", "cuda"), default="auto",
-                       help="torch device (default: auto = cuda when available, else cpu)")
+    group.add_argument(
+        "--background",
+        type=_color,
+        default=(1.0, 1.0, 1.0),
+        metavar="R,G,B",
+        help="background colour, components in 0..1 (default: 1,1,1 = white)",
+    )
+    group.add_argument(
+        "--backend",
+        choices=("auto", *BACKENDS),
+        default="auto",
+        help="rasterizer backend (default: auto = the fastest available)",
+    )
+    group.add_argument(
+        "--device",
+        choices=("auto", "cpu", "cuda"),
+        default="auto",
+        help="torch device (default: auto = cuda when available, else cpu)",
+    )
     return parent

@@ -1,23 +1,26 @@
 """``demo`` (what ``make demo`` runs): the shared donut and a shared texture, or generated stand-ins
 when ``../shared`` is absent. The only code that knows where the project's shared data lives."""
+
 from __future__ import annotations
-import os
-from ...core.features.weights import ENV_VAR
-from ..jobs import run_transfer, summary, write_before_after
-from ..progress import TerminalProgress
+
 import argparse
 import math
+import os
 from pathlib import Path
 from typing import Any
+
 import numpy as np
 import torch
+
+from ...core.features.weights import ENV_VAR
+from ...core.scene.gaussians import GaussianScene
 from ...core.scene.ply import read_ply
 from ...core.transfer.texture import load_texture
-from ...core.scene.gaussians import GaussianScene
+from ..jobs import run_transfer, summary, write_before_after
+from ..progress import TerminalProgress
+from .args import _positive_int, _render_options, _scene_options
 from .options import add_setting_arguments, config_from_args
 from .transfer import GIVEN
-from .args import _positive_int, _render_options, _scene_options
-
 
 SHARED = Path(__file__).resolve().parents[3].parent / "shared"
 """The project's shared data beside the checkout (development and CI); absent in an installed product."""
@@ -28,17 +31,25 @@ SHARED_WEIGHTS = SHARED / "weights"
 
 def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
-        "demo", parents=[debug, _scene_options(), _render_options()],
+        "demo",
+        parents=[debug, _scene_options(), _render_options()],
         help="texture-transfer the demo scene (what `make demo` runs)",
         description="Re-texture the shared donut scene with a shared texture (or a generated torus and "
-                    "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "
-                    "DIR/report.json.")
-    p.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
-                   help="output folder (default: out/demo)")
+        "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "
+        "DIR/report.json.",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("out/demo"), metavar="DIR", help="output folder (default: out/demo)"
+    )
     p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="use this scene instead of the donut")
     p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
-    p.add_argument("--views", dest="n_views", type=_positive_int, metavar="N",
-                   help="number of automatic views (default: the preset's)")
+    p.add_argument(
+        "--views",
+        dest="n_views",
+        type=_positive_int,
+        metavar="N",
+        help="number of automatic views (default: the preset's)",
+    )
     add_setting_arguments(p, given=GIVEN)
     p.set_defaults(run=cmd_demo)
 
@@ -55,8 +66,16 @@ def cmd_demo(args: argparse.Namespace) -> None:
     config = config_from_args(args)
     args.out.mkdir(parents=True, exist_ok=True)
     with TerminalProgress("demo") as bar:
-        result = run_transfer(scene, image, None, config, args.out / "stylised.ply", report=args.out / "report.json",
-                              progress=bar, scene_name=source)
+        result = run_transfer(
+            scene,
+            image,
+            None,
+            config,
+            args.out / "stylised.ply",
+            report=args.out / "report.json",
+            progress=bar,
+            scene_name=source,
+        )
     write_before_after(args.out / "before_after.png", scene, result.scene, image)
     print(summary(result.report))
     print(f"wrote {args.out / 'stylised.ply'}, {args.out / 'before_after.png'} and {args.out / 'report.json'}")

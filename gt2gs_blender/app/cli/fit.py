@@ -1,36 +1,73 @@
 """``fit``: reconstruct an LLFF capture with 3DGS and report held-out PSNR/SSIM."""
+
 from __future__ import annotations
-from ..progress import TerminalProgress
+
 import argparse
 from pathlib import Path
 from typing import Any
+
 from ...core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, fit_llff
 from ...core.render import BACKENDS
+from ..progress import TerminalProgress
 from .args import _color, _positive_int
 
 
 def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
-        "fit", parents=[debug], help="fit Gaussians to an LLFF capture (3DGS, random initialisation)",
+        "fit",
+        parents=[debug],
+        help="fit Gaussians to an LLFF capture (3DGS, random initialisation)",
         description="Reconstruct an LLFF capture (poses_bounds.npy + images_N/) from random points with 3DGS: "
-                    "every 8th view is held out and scored (PSNR, SSIM); the result is written in the INRIA "
-                    "layout (DIR/point_cloud.ply, DIR/point_cloud/iteration_N/point_cloud.ply, DIR/cameras.json).")
+        "every 8th view is held out and scored (PSNR, SSIM); the result is written in the INRIA "
+        "layout (DIR/point_cloud.ply, DIR/point_cloud/iteration_N/point_cloud.ply, DIR/cameras.json).",
+    )
     p.add_argument("scene", type=Path, metavar="LLFF_DIR")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--iterations", type=_positive_int, default=FitConfig.iterations, metavar="N",
-                   help=f"optimisation steps (default: {FitConfig.iterations})")
-    p.add_argument("--downscale", type=_positive_int, default=8, metavar="F",
-                   help="train on images F times smaller than the originals (default: 8)")
-    p.add_argument("--points", type=_positive_int, default=DEFAULT_POINTS, metavar="N",
-                   help=f"random initial points (default: {DEFAULT_POINTS:,})")
-    p.add_argument("--sh-degree", type=int, choices=range(4), default=DEFAULT_SH_DEGREE, metavar="D",
-                   help=f"spherical-harmonic degree 0-3 (default: {DEFAULT_SH_DEGREE})")
-    p.add_argument("--background", type=_color, default=(0.0, 0.0, 0.0), metavar="R,G,B",
-                   help="background colour behind the Gaussians (default: 0,0,0 = black)")
-    p.add_argument("--backend", choices=("auto", *BACKENDS), default="auto",
-                   help="rasterizer backend (default: auto = the fastest available)")
-    p.add_argument("--report", type=Path, metavar="R.json",
-                   help="write {test_psnr, test_ssim, seconds, n_gaussians, ...} as JSON")
+    p.add_argument(
+        "--iterations",
+        type=_positive_int,
+        default=FitConfig.iterations,
+        metavar="N",
+        help=f"optimisation steps (default: {FitConfig.iterations})",
+    )
+    p.add_argument(
+        "--downscale",
+        type=_positive_int,
+        default=8,
+        metavar="F",
+        help="train on images F times smaller than the originals (default: 8)",
+    )
+    p.add_argument(
+        "--points",
+        type=_positive_int,
+        default=DEFAULT_POINTS,
+        metavar="N",
+        help=f"random initial points (default: {DEFAULT_POINTS:,})",
+    )
+    p.add_argument(
+        "--sh-degree",
+        type=int,
+        choices=range(4),
+        default=DEFAULT_SH_DEGREE,
+        metavar="D",
+        help=f"spherical-harmonic degree 0-3 (default: {DEFAULT_SH_DEGREE})",
+    )
+    p.add_argument(
+        "--background",
+        type=_color,
+        default=(0.0, 0.0, 0.0),
+        metavar="R,G,B",
+        help="background colour behind the Gaussians (default: 0,0,0 = black)",
+    )
+    p.add_argument(
+        "--backend",
+        choices=("auto", *BACKENDS),
+        default="auto",
+        help="rasterizer backend (default: auto = the fastest available)",
+    )
+    p.add_argument(
+        "--report", type=Path, metavar="R.json", help="write {test_psnr, test_ssim, seconds, n_gaussians, ...} as JSON"
+    )
     p.set_defaults(run=cmd_fit)
 
 
@@ -38,16 +75,25 @@ def cmd_fit(args: argparse.Namespace) -> None:
     """Fit an LLFF capture, print the held-out scores and time, optionally write a JSON report."""
     config = FitConfig(iterations=args.iterations, background=args.background, backend=args.backend)
     with TerminalProgress("fit") as bar:
-        report = fit_llff(args.scene, args.out, downscale=args.downscale, config=config, n_points=args.points,
-                          sh_degree=args.sh_degree, progress=bar)
+        report = fit_llff(
+            args.scene,
+            args.out,
+            downscale=args.downscale,
+            config=config,
+            n_points=args.points,
+            sh_degree=args.sh_degree,
+            progress=bar,
+        )
     if args.report is not None:
         report.write_json(args.report)
     print(_fit_summary(report, args.out))
 
 
 def _fit_summary(report: FitReport, out_dir: Path) -> str:
-    return (f"held-out views ({report.test_views}): PSNR {report.test_psnr:.2f} dB, SSIM {report.test_ssim:.4f}\n"
-            f"{report.n_gaussians:,} Gaussians after {report.iterations} iterations on {report.train_views} views; "
-            f"{report.seconds:.0f} s in all ({report.train_seconds:.0f} s training)"
-            f"{f'; {report.skipped_steps} steps skipped (non-finite loss)' if report.skipped_steps else ''}\n"
-            f"wrote {out_dir / 'point_cloud.ply'} and {out_dir / 'cameras.json'}")
+    return (
+        f"held-out views ({report.test_views}): PSNR {report.test_psnr:.2f} dB, SSIM {report.test_ssim:.4f}\n"
+        f"{report.n_gaussians:,} Gaussians after {report.iterations} iterations on {report.train_views} views; "
+        f"{report.seconds:.0f} s in all ({report.train_seconds:.0f} s training)"
+        f"{f'; {report.skipped_steps} steps skipped (non-finite loss)' if report.skipped_steps else ''}\n"
+        f"wrote {out_dir / 'point_cloud.ply'} and {out_dir / 'cameras.json'}"
+    )

@@ -1,25 +1,30 @@
 """``info``: what a 3DGS file holds (count, SH degree, bounds, properties), as text or JSON."""
+
 from __future__ import annotations
+
 import argparse
 import json
 import re
 from pathlib import Path
 from typing import Any
+
+from ...core.scene.gaussians import GaussianScene
 from ...core.scene.inria import NORMAL_NAMES
 from ...core.scene.ply import read_ply
 from ...core.scene.ply_header import read_ply_header
-from ...core.scene.gaussians import GaussianScene
 from .args import _scene_options
-
 
 ROBUST_QUANTILE = 0.98
 """Robust bounds ignore the 2 % most extreme means on each side of each axis (as auto_views does)."""
 
 
 def _add_info(commands: Any, debug: argparse.ArgumentParser) -> None:
-    p = commands.add_parser("info", parents=[debug, _scene_options()],
-                            help="count, SH degree, bounds and properties of a 3DGS .ply",
-                            description="Describe a 3D Gaussian Splatting .ply file.")
+    p = commands.add_parser(
+        "info",
+        parents=[debug, _scene_options()],
+        help="count, SH degree, bounds and properties of a 3DGS .ply",
+        description="Describe a 3D Gaussian Splatting .ply file.",
+    )
     p.add_argument("scene", type=Path, metavar="SCENE.ply")
     p.add_argument("--json", action="store_true", help="print the description as JSON")
     p.set_defaults(run=cmd_info)
@@ -89,8 +94,14 @@ def _compact_properties(properties: list[dict[str, str]]) -> str:
     for prop in properties:
         match = re.fullmatch(r"(.*_)(\d+)", prop["name"])
         last = runs[-1] if runs else None
-        if match and last and last[1] is not None and last[0] == match[1] and last[3] == prop["type"] \
-                and last[2] + 1 == int(match[2]):
+        if (
+            match
+            and last
+            and last[1] is not None
+            and last[0] == match[1]
+            and last[3] == prop["type"]
+            and last[2] + 1 == int(match[2])
+        ):
             last[2] += 1
         elif match:
             runs.append([match[1], int(match[2]), int(match[2]), prop["type"]])

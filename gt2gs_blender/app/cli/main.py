@@ -1,24 +1,26 @@
 """The command line, ``python -m gt2gs_blender``: inspect a 3DGS PLY, render it, run the demo, fit one.
 
-Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line
-on stderr and exit with 2; any other exception is a bug, also reported in one line, with exit code
-1; ``--debug`` adds the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
+Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line on stderr
+and exit with 2; any other exception is a bug, also reported in one line, with exit code 1; ``--debug`` adds
+the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
 """
+
 from __future__ import annotations
+
 import argparse
 import contextlib
 import logging
 import sys
 import traceback
 import warnings
-from typing import Iterator, Sequence
+from collections.abc import Iterator, Sequence
+
 from ...core.errors import GT2GSError, out_of_memory_message
 from . import transfer as transfer_cmd
-from .info import _add_info
-from .render import _add_render
 from .demo import _add_demo
 from .fit import _add_fit
-
+from .info import _add_info
+from .render import _add_render
 
 PROG = "gt2gs"
 
@@ -52,11 +54,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argparse tree: global --debug, then the info / render / demo subcommands."""
     debug = argparse.ArgumentParser(add_help=False)
-    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
-                       help="print the traceback of errors")
+    debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of errors")
     parser = argparse.ArgumentParser(
-        prog="python -m gt2gs_blender", allow_abbrev=False,
-        description="GT²-GS texture transfer for 3D Gaussian Splatting: command-line tools.")
+        prog="python -m gt2gs_blender",
+        allow_abbrev=False,
+        description="GT²-GS texture transfer for 3D Gaussian Splatting: command-line tools.",
+    )
     parser.add_argument("--debug", action="store_true", help="print the traceback of errors")
     commands = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
     _add_info(commands, debug)

@@ -12,17 +12,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ...core.transfer.config import (
-    DEFAULT_PRESET,
-    PARTS,
-    PRESET_HELP,
-    PRESETS,
-    Setting,
-    TransferConfig,
-    paper_value,
-    preset,
-    user_settings,
-)
+from ...core.transfer.config import PARTS, Setting, TransferConfig, user_settings
+from ...core.transfer.presets import DEFAULT_PRESET, PRESET_HELP, PRESETS, paper_value, preset
 from .args import _color
 
 METAVARS = {"px": "PX", "°": "DEG", "steps": "N"}
@@ -36,16 +27,21 @@ def flag(name: str, meta: Setting) -> str:
 def add_setting_arguments(parser: argparse.ArgumentParser, given: tuple[str, ...] = ()) -> None:
     """``--preset`` and one option per user setting, grouped by part; ``given``: settings whose option the
     command already defines (with ``dest`` = the setting's name), e.g. the shared rendering options."""
-    parser.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET,
-                        help=f"settings preset (default: {DEFAULT_PRESET}): "
-                             + "; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()))
+    parser.add_argument(
+        "--preset",
+        choices=tuple(PRESETS),
+        default=DEFAULT_PRESET,
+        help=f"settings preset (default: {DEFAULT_PRESET}): "
+        + "; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
+    )
     groups = {part: parser.add_argument_group(f"{title.lower()} settings") for part, title in PARTS.items()}
     for name, meta, kind in user_settings():
         if name in given:
             continue
         group = groups[meta.part]
-        group.add_argument(flag(name, meta), dest=name, default=None, help=help_text(name, meta),
-                           **_argument_kind(meta, kind))
+        group.add_argument(
+            flag(name, meta), dest=name, default=None, help=help_text(name, meta), **_argument_kind(meta, kind)
+        )
         if meta.switch is not None:
             switch, value, text = meta.switch
             group.add_argument(switch, dest=name, action="store_const", const=value, help=text)

@@ -1,27 +1,31 @@
 """``render``: a scene to PNGs (and 16-bit depth) from given or generated cameras."""
+
 from __future__ import annotations
-from ...core.device import resolve_device
-from ...core.progress import Progress
-from ..images import write_png
-from ..progress import TerminalProgress
+
 import argparse
 import json
 import time
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Sequence
+from typing import Any
+
 import numpy as np
 import torch
+
 from ...core.cameras.camera import Camera
-from ...core.cameras.generate import auto_views
-from ...core.cameras.files import load_views
 from ...core.cameras.cameras_json import save_cameras_json
+from ...core.cameras.files import load_views
+from ...core.cameras.generate import auto_views
+from ...core.device import resolve_device
 from ...core.errors import GT2GSError
-from ...core.scene.ply import read_ply
+from ...core.progress import Progress
 from ...core.render import render, resolve_backend
 from ...core.scene.gaussians import GaussianScene
+from ...core.scene.ply import read_ply
+from ..images import write_png
+from ..progress import TerminalProgress
 from .args import _positive_float, _positive_int, _render_options, _scene_options, _up
-
 
 BATCH = 4
 """Cameras rendered per rasterizer call: enough to amortise the per-call set-up, little memory."""
@@ -33,23 +37,38 @@ DEPTH_MIN_ALPHA = 0.1
 
 def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
-        "render", parents=[debug, _scene_options(), _render_options()],
+        "render",
+        parents=[debug, _scene_options(), _render_options()],
         help="render a 3DGS .ply to PNGs",
         description="Render a scene to DIR/view_000.png, ... and write the cameras used to DIR/cameras.json. "
-                    "Without --cameras, N views on a ring fitted to the scene are generated.")
+        "Without --cameras, N views on a ring fitted to the scene are generated.",
+    )
     p.add_argument("scene", type=Path, metavar="SCENE.ply")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder")
     source = p.add_mutually_exclusive_group()
-    source.add_argument("--cameras", type=Path, metavar="FILE_OR_DIR",
-                        help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one")
+    source.add_argument(
+        "--cameras",
+        type=Path,
+        metavar="FILE_OR_DIR",
+        help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
+    )
     source.add_argument("--views", type=_positive_int, metavar="N", help="generate N views (default: 8)")
     p.add_argument("--width", type=_positive_int, metavar="W", help="generated views' width (default: 512)")
     p.add_argument("--height", type=_positive_int, metavar="H", help="generated views' height (default: W)")
     p.add_argument("--scale", type=_positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
-    p.add_argument("--kind", choices=("orbit", "arc"), default="orbit",
-                   help="generated views: a full ring or a 60° forward-facing arc (default: orbit)")
-    p.add_argument("--up", type=_up, default=(0.0, 0.0, 1.0), metavar="auto|X,Y,Z",
-                   help="the scene's up axis for generated views (default: 0,0,1, Blender's)")
+    p.add_argument(
+        "--kind",
+        choices=("orbit", "arc"),
+        default="orbit",
+        help="generated views: a full ring or a 60° forward-facing arc (default: orbit)",
+    )
+    p.add_argument(
+        "--up",
+        type=_up,
+        default=(0.0, 0.0, 1.0),
+        metavar="auto|X,Y,Z",
+        help="the scene's up axis for generated views (default: 0,0,1, Blender's)",
+    )
     p.add_argument("--depth", action="store_true", help="also write 16-bit depth PNGs (DIR/depth_000.png, ...)")
     p.set_defaults(run=cmd_render)
 
@@ -70,8 +89,15 @@ def cmd_render(args: argparse.Namespace) -> None:
     """Render a scene from given or generated cameras into a folder of PNGs."""
     scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
     cameras = _cameras(args, scene)
-    report = render_to_dir(scene, cameras, args.output, background=args.background, backend=args.backend,
-                           device=args.device, depth=args.depth)
+    report = render_to_dir(
+        scene,
+        cameras,
+        args.output,
+        background=args.background,
+        backend=args.backend,
+        device=args.device,
+        depth=args.depth,
+    )
     print(_summary(report, cameras, args.output))
 
 
@@ -89,8 +115,14 @@ def _cameras(args: argparse.Namespace, scene: GaussianScene) -> list[Camera]:
 
 
 def render_to_dir(
-    scene: GaussianScene, cameras: Sequence[Camera], out_dir: Path, *, background: Sequence[float],
-    backend: str = "auto", device: str = "auto", depth: bool = False,
+    scene: GaussianScene,
+    cameras: Sequence[Camera],
+    out_dir: Path,
+    *,
+    background: Sequence[float],
+    backend: str = "auto",
+    device: str = "auto",
+    depth: bool = False,
 ) -> RenderReport:
     """Render ``cameras`` to ``out_dir``/view_###.png (+ depth_###.png) and save them as cameras.json.
 
@@ -109,8 +141,7 @@ def render_to_dir(
     done = 0
     with torch.no_grad():
         for batch in _batches(cameras):
-            out = render(scene, [cameras[i] for i in batch], background=background, render_depth=depth,
-                         backend=backend)
+            out = render(scene, [cameras[i] for i in batch], background=background, render_depth=depth, backend=backend)
             for j, i in enumerate(batch):
                 write_png(images[i], _to_rgb8(out.colors[j]))
                 if depth:
@@ -119,7 +150,9 @@ def render_to_dir(
                     depth_ranges[f"depth_{i:03d}.png"] = near_far
             done += len(batch)
             if bar is not None:
-                bar(Progress("render", done, len(cameras), done / len(cameras), None, f"rendered {done}/{len(cameras)}"))
+                bar(
+                    Progress("render", done, len(cameras), done / len(cameras), None, f"rendered {done}/{len(cameras)}")
+                )
     if bar is not None:
         bar.close()
     save_cameras_json(out_dir / "cameras.json", cameras)
@@ -135,7 +168,7 @@ def _batches(cameras: Sequence[Camera]) -> Iterator[list[int]]:
         by_size.setdefault((camera.width, camera.height), []).append(i)
     for indices in by_size.values():
         for start in range(0, len(indices), BATCH):
-            yield indices[start:start + BATCH]
+            yield indices[start : start + BATCH]
 
 
 def _to_rgb8(rgb: torch.Tensor) -> np.ndarray:
@@ -157,13 +190,17 @@ def _encode_depth(depth: torch.Tensor, alpha: torch.Tensor) -> tuple[np.ndarray,
 
 
 def _write_depth_ranges(path: Path, ranges: dict[str, list[float] | None]) -> None:
-    doc = {"encoding": f"0 = empty (alpha < {DEPTH_MIN_ALPHA}); 1..65535 = near..far, linear in camera z",
-           "near_far": ranges}
+    doc = {
+        "encoding": f"0 = empty (alpha < {DEPTH_MIN_ALPHA}); 1..65535 = near..far, linear in camera z",
+        "near_far": ranges,
+    }
     path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
 
 
 def _summary(report: RenderReport, cameras: Sequence[Camera], out_dir: Path) -> str:
     sizes = sorted({f"{c.width}x{c.height}" for c in cameras})
     setup = f" + {report.setup_s:.1f} s backend set-up" if report.setup_s >= 1.0 else ""
-    return (f"rendered {len(cameras)} view(s) at {', '.join(sizes)} to {out_dir}/ "
-            f"(backend {report.backend}, {report.render_s:.2f} s{setup})")
+    return (
+        f"rendered {len(cameras)} view(s) at {', '.join(sizes)} to {out_dir}/ "
+        f"(backend {report.backend}, {report.render_s:.2f} s{setup})"
+    )

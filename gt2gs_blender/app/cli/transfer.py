@@ -1,23 +1,30 @@
 """``transfer``: re-texture a scene file with a texture photo and write the stylised scene."""
+
 from __future__ import annotations
-from .args import _render_options, _scene_options
-from .options import add_setting_arguments, config_from_args
+
 import argparse
 from pathlib import Path
 from typing import Any
+
 from ...core.cameras.camera import Camera
-from ...core.cameras.llff import load_llff
 from ...core.cameras.files import load_views
+from ...core.cameras.llff import load_llff
 from ...core.scene.ply import read_ply
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
+from .args import _render_options, _scene_options
+from .options import add_setting_arguments, config_from_args
 
 
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
     """Where the views come from: a cameras file, an LLFF folder, or a number of automatic views."""
     views = p.add_mutually_exclusive_group()
-    views.add_argument("--cameras", type=Path, metavar="FILE_OR_DIR",
-                       help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one")
+    views.add_argument(
+        "--cameras",
+        type=Path,
+        metavar="FILE_OR_DIR",
+        help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
+    )
     views.add_argument("--llff", type=Path, metavar="DIR", help="an LLFF capture folder (poses_bounds.npy)")
     views.add_argument("--views", dest="n_views", type=int, metavar="N", help="N automatic views around the scene")
 
@@ -43,8 +50,18 @@ def cmd_transfer(args: argparse.Namespace) -> None:
     region = load_region(args.region, len(scene)) if args.region is not None else None
     views, config = _views(args), config_from_args(args)
     with TerminalProgress("transfer") as bar:
-        result = run_transfer(scene, texture, views, config, args.output, report=args.report, region=region,
-                              progress=bar, scene_name=args.scene, views_name=_views_source(args))
+        result = run_transfer(
+            scene,
+            texture,
+            views,
+            config,
+            args.output,
+            report=args.report,
+            region=region,
+            progress=bar,
+            scene_name=args.scene,
+            views_name=_views_source(args),
+        )
     print(f"stylised scene: {args.output}")
     if args.report is not None:
         print(f"report: {args.report}")
@@ -57,10 +74,12 @@ def cmd_transfer(args: argparse.Namespace) -> None:
 def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``transfer`` subcommand."""
     p = commands.add_parser(
-        "transfer", parents=[debug, _scene_options(), _render_options()],
+        "transfer",
+        parents=[debug, _scene_options(), _render_options()],
         help="re-texture a 3DGS .ply with a texture photo (GT²-GS)",
         description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
-                    "writes the stylised scene to OUT.ply.")
+        "writes the stylised scene to OUT.ply.",
+    )
     p.add_argument("scene", type=Path, metavar="SCENE.ply")
     p.add_argument("texture", type=Path, metavar="TEXTURE")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="OUT.ply", help="the stylised scene")
@@ -68,8 +87,12 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     add_setting_arguments(p, given=GIVEN)
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
     p.add_argument("--strip", type=Path, metavar="PNG", help="also write a before/after picture")
-    p.add_argument("--region", type=Path, metavar="MASK.npy",
-                   help="restyle only these Gaussians (.npy of indices or booleans); the rest stay bit-identical")
+    p.add_argument(
+        "--region",
+        type=Path,
+        metavar="MASK.npy",
+        help="restyle only these Gaussians (.npy of indices or booleans); the rest stay bit-identical",
+    )
     p.set_defaults(run=cmd_transfer)
 
 

@@ -1,12 +1,15 @@
 """The pinhole camera every part of the engine uses: OpenCV axes (x right, y down, z forward), a
 world->camera 4x4 ``viewmat`` and pixel intrinsics with pixel centres at +0.5."""
+
 from __future__ import annotations
+
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
+
 import numpy as np
 import torch
-
 
 _ORTHO_TOL = 1e-4
 
@@ -56,9 +59,17 @@ class Camera:
 
     @classmethod
     def from_cam_to_world(
-        cls, R_c2w: np.ndarray, center: Sequence[float], fx: float, fy: float, cx: float, cy: float,
-        width: int, height: int, name: str = "",
-    ) -> "Camera":
+        cls,
+        R_c2w: np.ndarray,
+        center: Sequence[float],
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        width: int,
+        height: int,
+        name: str = "",
+    ) -> Camera:
         """A camera from its camera->world rotation (columns = right, down, forward) and centre."""
         R = np.asarray(R_c2w, dtype=np.float64)
         c = np.asarray(center, dtype=np.float64)
@@ -102,7 +113,7 @@ class Camera:
         """Vertical field of view in radians."""
         return 2.0 * math.atan(self.height / (2.0 * self.fy))
 
-    def scaled(self, factor: float) -> "Camera":
+    def scaled(self, factor: float) -> Camera:
         """The same camera for an image resized by ``factor`` (e.g. 0.5, 0.25).
 
         Sizes are rounded; intrinsics scale by the actual per-axis size ratio, which equals
@@ -113,8 +124,9 @@ class Camera:
         width = max(1, round(self.width * factor))
         height = max(1, round(self.height * factor))
         sx, sy = width / self.width, height / self.height
-        return Camera(self.world_to_cam, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
-                      width, height, self.name)
+        return Camera(
+            self.world_to_cam, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height, self.name
+        )
 
     def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates (N,2) and camera depths (N,) of world points (N,3).
@@ -166,7 +178,9 @@ def _check_viewmat(viewmat: np.ndarray) -> None:
 
 
 def stack_cameras(
-    cameras: Sequence[Camera], device: torch.device | str | None = None, dtype: torch.dtype = torch.float32,
+    cameras: Sequence[Camera],
+    device: torch.device | str | None = None,
+    dtype: torch.dtype = torch.float32,
 ) -> tuple[torch.Tensor, torch.Tensor, int, int]:
     """Batch cameras for the rasterizer: viewmats (C,4,4), Ks (C,3,3), width, height."""
     if not cameras:

@@ -1,10 +1,15 @@
 """``cameras.json`` as the INRIA 3DGS trainer writes it: read into cameras and written back."""
+
 from __future__ import annotations
+
 import json
 import math
 import os
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
+
 from ..atomic import atomic_write
 from ..errors import CameraFileError
 from .camera import Camera
@@ -48,8 +53,15 @@ def _camera_from_json(path: str | os.PathLike, index: int, entry: Any) -> Camera
     name = entry.get("img_name", entry.get("id", ""))
     try:
         return Camera.from_cam_to_world(
-            rotation, position, _json_number(path, where, entry, "fx"), _json_number(path, where, entry, "fy"),
-            cx, cy, width, height, str(name),
+            rotation,
+            position,
+            _json_number(path, where, entry, "fx"),
+            _json_number(path, where, entry, "fy"),
+            cx,
+            cy,
+            width,
+            height,
+            str(name),
         )
     except ValueError as exc:
         raise CameraFileError(path, f"{where}: {exc}") from exc
@@ -112,8 +124,14 @@ def save_cameras_json(path: str | os.PathLike, cameras: Sequence[Camera]) -> Non
     for i, cam in enumerate(cameras):
         c2w = cam.cam_to_world
         entry: dict[str, Any] = {
-            "id": i, "img_name": cam.name, "width": cam.width, "height": cam.height,
-            "position": c2w[:3, 3].tolist(), "rotation": c2w[:3, :3].tolist(), "fy": cam.fy, "fx": cam.fx,
+            "id": i,
+            "img_name": cam.name,
+            "width": cam.width,
+            "height": cam.height,
+            "position": c2w[:3, 3].tolist(),
+            "rotation": c2w[:3, :3].tolist(),
+            "fy": cam.fy,
+            "fx": cam.fx,
         }
         if cam.cx != cam.width / 2.0 or cam.cy != cam.height / 2.0:
             entry.update(cx=cam.cx, cy=cam.cy)

@@ -1,24 +1,33 @@
 """COLMAP sparse models (text or binary): cameras, and the points that can seed a fit."""
+
 from __future__ import annotations
+
 import math
 import os
 import struct
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
+
 import numpy as np
+
 from ..errors import CameraFileError
 from ..rotations import DEGENERATE_NORM, quats_to_matrices
 from .camera import Camera
-
 
 # ---------------------------------------------------------------------------------------------------
 # COLMAP sparse models
 # ---------------------------------------------------------------------------------------------------
 # model id -> (name, parameter count); the supported pinhole-like models (distortion ignored).
-_COLMAP_MODELS = {0: ("SIMPLE_PINHOLE", 3), 1: ("PINHOLE", 4), 2: ("SIMPLE_RADIAL", 4), 3: ("RADIAL", 5),
-                  4: ("OPENCV", 8)}
+_COLMAP_MODELS = {
+    0: ("SIMPLE_PINHOLE", 3),
+    1: ("PINHOLE", 4),
+    2: ("SIMPLE_RADIAL", 4),
+    3: ("RADIAL", 5),
+    4: ("OPENCV", 8),
+}
 
 
 _COLMAP_PARAM_COUNTS = dict(_COLMAP_MODELS.values())
@@ -87,12 +96,17 @@ def _colmap_folder(path: str | os.PathLike) -> tuple[Path, str]:
 
 
 def _colmap_intrinsics(
-    path: Path, model: str, width: float, height: float, params: Sequence[float],
+    path: Path,
+    model: str,
+    width: float,
+    height: float,
+    params: Sequence[float],
 ) -> _ColmapIntrinsics:
     """Pinhole intrinsics from a COLMAP camera model's parameters."""
     if model not in _COLMAP_PARAM_COUNTS:
-        raise CameraFileError(path, f"camera model {model} is not supported "
-                                    f"(supported: {', '.join(_COLMAP_PARAM_COUNTS)})")
+        raise CameraFileError(
+            path, f"camera model {model} is not supported (supported: {', '.join(_COLMAP_PARAM_COUNTS)})"
+        )
     n = _COLMAP_PARAM_COUNTS[model]
     if len(params) != n:
         raise CameraFileError(path, f"camera model {model} needs {n} parameters, got {len(params)}")
@@ -221,15 +235,16 @@ class _BinaryReader:
 
     def skip(self, size: int) -> None:
         if size < 0 or self.offset + size > len(self.data):
-            raise CameraFileError(self.path, f"truncated: needs {size} more bytes at byte {self.offset} "
-                                             f"of {len(self.data)}")
+            raise CameraFileError(
+                self.path, f"truncated: needs {size} more bytes at byte {self.offset} of {len(self.data)}"
+            )
         self.offset += size
 
     def read_cstring(self) -> str:
         end = self.data.find(b"\0", self.offset)
         if end < 0:
             raise CameraFileError(self.path, f"truncated: unterminated image name at byte {self.offset}")
-        raw, self.offset = self.data[self.offset:end], end + 1
+        raw, self.offset = self.data[self.offset : end], end + 1
         try:
             return raw.decode("utf-8")
         except UnicodeDecodeError as exc:
@@ -252,8 +267,11 @@ def _read_cameras_bin(path: Path) -> dict[int, _ColmapIntrinsics]:
     for _ in range(count):
         camera_id, model_id, width, height = reader.read("iiQQ")
         if model_id not in _COLMAP_MODELS:
-            raise CameraFileError(path, f"camera {camera_id} has unsupported model id {model_id} "
-                                        f"(supported: {', '.join(_COLMAP_PARAM_COUNTS)})")
+            raise CameraFileError(
+                path,
+                f"camera {camera_id} has unsupported model id {model_id} "
+                f"(supported: {', '.join(_COLMAP_PARAM_COUNTS)})",
+            )
         model, n = _COLMAP_MODELS[model_id]
         params = reader.finite(reader.read(f"{n}d"), "camera parameters")
         cameras[camera_id] = _colmap_intrinsics(path, model, width, height, params)

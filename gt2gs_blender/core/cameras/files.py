@@ -1,13 +1,16 @@
 """One entry point for every camera file the tools accept: cameras.json, poses_bounds.npy, a COLMAP
 model, or a folder holding one. Each loader raises :class:`CameraFileError` on malformed input."""
+
 from __future__ import annotations
+
 import os
 from pathlib import Path
+
 from ..errors import CameraFileError
 from .camera import Camera
 from .cameras_json import load_cameras_json
-from .llff import load_llff
 from .colmap import _find_colmap_folder, load_colmap
+from .llff import load_llff
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -34,5 +37,7 @@ def load_views(path: str | os.PathLike) -> list[Camera]:
         return load_colmap(p)
     if (p / "poses_bounds.npy").is_file():
         return load_llff(p).cameras
-    raise CameraFileError(path, "no cameras found: expected cameras.json, poses_bounds.npy, "
-                                "or a COLMAP model (here, in sparse/0 or in sparse)")
+    raise CameraFileError(
+        path,
+        "no cameras found: expected cameras.json, poses_bounds.npy, or a COLMAP model (here, in sparse/0 or in sparse)",
+    )

@@ -2,10 +2,14 @@
 
 GT^2 visits views in order and warps matches from one view to the next, so the generators return
 views ordered along their path (consecutive views are neighbours)."""
+
 from __future__ import annotations
+
 import math
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
+
 import numpy as np
+
 from ..scene.gaussians import GaussianScene
 from .camera import Camera
 
@@ -14,8 +18,14 @@ from .camera import Camera
 # Generated views
 # ---------------------------------------------------------------------------------------------------
 def look_at(
-    eye: Sequence[float], target: Sequence[float], *, width: int, height: int, fov_deg: float = 50.0,
-    up: Sequence[float] = (0.0, 0.0, 1.0), name: str = "",
+    eye: Sequence[float],
+    target: Sequence[float],
+    *,
+    width: int,
+    height: int,
+    fov_deg: float = 50.0,
+    up: Sequence[float] = (0.0, 0.0, 1.0),
+    name: str = "",
 ) -> Camera:
     """A camera at ``eye`` looking at ``target`` with ``up`` pointing up in the image.
 
@@ -31,8 +41,9 @@ def look_at(
     right /= np.linalg.norm(right)
     down = np.cross(forward, right)
     f = (width / 2.0) / math.tan(math.radians(fov_deg) / 2.0)
-    return Camera.from_cam_to_world(np.stack([right, down, forward], axis=1), eye_v, f, f,
-                                    width / 2.0, height / 2.0, width, height, name)
+    return Camera.from_cam_to_world(
+        np.stack([right, down, forward], axis=1), eye_v, f, f, width / 2.0, height / 2.0, width, height, name
+    )
 
 
 def camera_path(cameras: Sequence[Camera], frames_per_gap: int, *, closed: bool = False) -> list[Camera]:
@@ -50,9 +61,20 @@ def camera_path(cameras: Sequence[Camera], frames_per_gap: int, *, closed: bool 
         axis_angle = _rotation_log(r_a.T @ b.cam_to_world[:3, :3])
         for k in range(frames_per_gap):
             t = k / frames_per_gap
-            path.append(Camera.from_cam_to_world(r_a @ _rotation_exp(t * axis_angle), (1 - t) * a.center + t * b.center,
-                                                 a.fx, a.fy, a.cx, a.cy, a.width, a.height, f"{a.name}+{k}"))
-    return path if closed and len(cameras) > 1 else path + [cameras[-1]]
+            path.append(
+                Camera.from_cam_to_world(
+                    r_a @ _rotation_exp(t * axis_angle),
+                    (1 - t) * a.center + t * b.center,
+                    a.fx,
+                    a.fy,
+                    a.cx,
+                    a.cy,
+                    a.width,
+                    a.height,
+                    f"{a.name}+{k}",
+                )
+            )
+    return path if closed and len(cameras) > 1 else [*path, cameras[-1]]
 
 
 def _rotation_log(r: np.ndarray) -> np.ndarray:
@@ -75,8 +97,16 @@ def _rotation_exp(w: np.ndarray) -> np.ndarray:
 
 
 def orbit_views(
-    center: Sequence[float], radius: float, n: int, *, width: int, height: int, fov_deg: float = 50.0,
-    elevation_deg: float = 20.0, up: Sequence[float] = (0.0, 0.0, 1.0), front: Sequence[float] = (0.0, -1.0, 0.0),
+    center: Sequence[float],
+    radius: float,
+    n: int,
+    *,
+    width: int,
+    height: int,
+    fov_deg: float = 50.0,
+    elevation_deg: float = 20.0,
+    up: Sequence[float] = (0.0, 0.0, 1.0),
+    front: Sequence[float] = (0.0, -1.0, 0.0),
 ) -> list[Camera]:
     """``n`` cameras on a ring around ``center`` looking at it, ordered by azimuth.
 
@@ -89,8 +119,16 @@ def orbit_views(
 
 
 def arc_views(
-    center: Sequence[float], radius: float, n: int, *, width: int, height: int, fov_deg: float = 50.0,
-    arc_deg: float = 60.0, elevation_deg: float = 10.0, up: Sequence[float] = (0.0, 0.0, 1.0),
+    center: Sequence[float],
+    radius: float,
+    n: int,
+    *,
+    width: int,
+    height: int,
+    fov_deg: float = 50.0,
+    arc_deg: float = 60.0,
+    elevation_deg: float = 10.0,
+    up: Sequence[float] = (0.0, 0.0, 1.0),
     front: Sequence[float] = (0.0, -1.0, 0.0),
 ) -> list[Camera]:
     """``n`` cameras on an arc of ``arc_deg`` degrees on the ``front`` side of ``center``, looking at
@@ -102,8 +140,16 @@ def arc_views(
 
 
 def _ring_views(
-    center: Sequence[float], radius: float, azimuths_deg: np.ndarray, elevation_deg: float,
-    up: Sequence[float], front: Sequence[float], width: int, height: int, fov_deg: float, prefix: str,
+    center: Sequence[float],
+    radius: float,
+    azimuths_deg: np.ndarray,
+    elevation_deg: float,
+    up: Sequence[float],
+    front: Sequence[float],
+    width: int,
+    height: int,
+    fov_deg: float,
+    prefix: str,
 ) -> list[Camera]:
     """Cameras at the given azimuths (0 = ``front``) and elevation on a sphere around ``center``."""
     if len(azimuths_deg) < 1:
@@ -120,8 +166,11 @@ def _ring_views(
     cameras = []
     for i, az in enumerate(np.radians(azimuths_deg)):
         offset = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up_v
-        cameras.append(look_at(c + radius * offset, c, width=width, height=height, fov_deg=fov_deg,
-                               up=up_v, name=f"{prefix}_{i:03d}"))
+        cameras.append(
+            look_at(
+                c + radius * offset, c, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"{prefix}_{i:03d}"
+            )
+        )
     return cameras
 
 
@@ -146,7 +195,9 @@ def _unit(v: Sequence[float], what: str) -> np.ndarray:
 
 
 def estimate_up_axis(
-    points: np.ndarray, prefer: Sequence[float] = (0.0, 0.0, 1.0), flatness: float = 0.5,
+    points: np.ndarray,
+    prefer: Sequence[float] = (0.0, 0.0, 1.0),
+    flatness: float = 0.5,
 ) -> np.ndarray:
     """The scene's up axis: the smallest-variance principal axis of ``points``.
 
@@ -166,9 +217,17 @@ def estimate_up_axis(
 
 
 def auto_views(
-    scene: GaussianScene, n: int, *, width: int = 256, height: int = 256, kind: str = "auto",
-    fov_deg: float = 50.0, elevation_deg: float = 20.0, up: Sequence[float] | str = (0.0, 0.0, 1.0),
-    quantile: float = 0.98, margin: float = 1.1,
+    scene: GaussianScene,
+    n: int,
+    *,
+    width: int = 256,
+    height: int = 256,
+    kind: str = "auto",
+    fov_deg: float = 50.0,
+    elevation_deg: float = 20.0,
+    up: Sequence[float] | str = (0.0, 0.0, 1.0),
+    quantile: float = 0.98,
+    margin: float = 1.1,
 ) -> list[Camera]:
     """Ordered views fitted to a scene when no cameras are given.
 
@@ -197,8 +256,7 @@ def auto_views(
     make = arc_views if kind == "arc" else orbit_views
 
     def views(radius: float) -> list[Camera]:
-        return make(center, radius, n, width=width, height=height, fov_deg=fov_deg,
-                    elevation_deg=elevation_deg, up=up)
+        return make(center, radius, n, width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up)
 
     corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
@@ -207,6 +265,7 @@ def auto_views(
 
 def _fitting_radius(views: Callable[[float], list[Camera]], corners: np.ndarray, low: float, high: float) -> float:
     """Smallest orbit radius in [low, high] at which every corner projects inside every view (bisection)."""
+
     def inside(radius: float) -> bool:
         for cam in views(radius):
             uv, depth = cam.project(corners)

@@ -1,14 +1,17 @@
 """LLFF captures (``poses_bounds.npy`` + images): cameras converted to the OpenCV frame at the edge."""
+
 from __future__ import annotations
+
 import math
 import os
 import tokenize
 from dataclasses import dataclass
 from pathlib import Path
+
 import numpy as np
+
 from ..errors import CameraFileError
 from .camera import Camera
-
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -56,8 +59,9 @@ def _read_poses_bounds(npy: Path) -> np.ndarray:
             version = np.lib.format.read_magic(f)
             if version not in ((1, 0), (2, 0)):
                 raise ValueError(f"unsupported .npy format version {version}")
-            read_header = np.lib.format.read_array_header_1_0 if version == (1, 0) \
-                else np.lib.format.read_array_header_2_0
+            read_header = (
+                np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+            )
             shape, _, dtype = read_header(f)
             data_bytes = os.fstat(f.fileno()).st_size - f.tell()
         if len(shape) != 2 or shape[0] == 0 or shape[1] != 17:
@@ -65,8 +69,9 @@ def _read_poses_bounds(npy: Path) -> np.ndarray:
         if dtype.kind not in "iuf":
             raise ValueError(f"expected real numbers, got dtype {dtype}")
         if shape[0] * shape[1] * dtype.itemsize > data_bytes:
-            raise ValueError(f"truncated: the header promises a {shape[0]} x 17 array but only {data_bytes} "
-                             "bytes of data follow")
+            raise ValueError(
+                f"truncated: the header promises a {shape[0]} x 17 array but only {data_bytes} bytes of data follow"
+            )
         table = np.load(npy, allow_pickle=False)
     except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError) as exc:
         raise CameraFileError(npy, f"cannot read poses_bounds.npy: {exc}") from exc
@@ -85,8 +90,9 @@ def _llff_camera(npy: Path, index: int, pose: np.ndarray, downscale: float) -> C
     R_c2w = np.stack([pose[:, 1], pose[:, 0], -pose[:, 2]], axis=1)
     sx, sy = width / w, height / h
     try:
-        return Camera.from_cam_to_world(R_c2w, pose[:, 3], f * sx, f * sy, width / 2.0, height / 2.0,
-                                        width, height, f"{index:03d}")
+        return Camera.from_cam_to_world(
+            R_c2w, pose[:, 3], f * sx, f * sy, width / 2.0, height / 2.0, width, height, f"{index:03d}"
+        )
     except ValueError as exc:
         raise CameraFileError(npy, f"pose {index}: {exc}") from exc
 

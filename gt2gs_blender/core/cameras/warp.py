@@ -6,6 +6,7 @@ at u = j + 0.5, v = i + 0.5 and u = fx*x/z + cx). Depths here are *expected* dep
 rasterizer's sum T*alpha*z divided by alpha, see :func:`expected_depth`); 0 marks "no surface".
 Geometry is computed in float64.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

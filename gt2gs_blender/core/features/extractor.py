@@ -1,25 +1,29 @@
 """VGG feature extractor: one network type, parameterised by a :class:`FeatureSpec`.
 
-The paper matches rendered and texture features of torchvision's ImageNet VGG-16 at relu3_1,
-relu3_2 and relu3_3 (768 channels), on renders downscaled x0.5 before the network. Where those
-weights do not exist (no internet, no cached copy) the normalised VGG-19 to relu3_1 is the closest
-real substitute (relu2_1 + relu3_1 by default). Both are plain ``nn.Sequential`` stacks with
-torchvision's layer indices (``features.N.weight``), so torchvision state dicts load unchanged;
-torchvision itself cannot be imported beside the torch CPU wheel used here (docs/architecture.md, "Feature network and weights").
-Which weights are found, and the reported no-weights fallback, is :mod:`.weights`' business.
+The paper matches rendered and texture features of torchvision's ImageNet VGG-16 at relu3_1, relu3_2 and
+relu3_3 (768 channels), on renders downscaled x0.5 before the network. Where those weights do not exist (no
+internet, no cached copy) the normalised VGG-19 to relu3_1 is the closest real substitute (relu2_1 + relu3_1
+by default). Both are plain ``nn.Sequential`` stacks with torchvision's layer indices
+(``features.N.weight``), so torchvision state dicts load unchanged; torchvision itself cannot be imported
+beside the torch CPU wheel used here (docs/architecture.md, "Feature network and weights"). Which weights
+are found, and the reported no-weights fallback, is :mod:`.weights`' business.
 """
+
 from __future__ import annotations
+
 import contextlib
 import hashlib
 import os
 from collections.abc import Mapping
 from typing import TYPE_CHECKING, Any
+
 import torch
 import torch.nn.functional as F
 from torch import nn
+
 if TYPE_CHECKING:
     from .weights import ResolvedWeights
-from .specs import FALLBACK_SEED, FeatureSpec, IMAGENET_MEAN, IMAGENET_STD, RENDER_SCALE
+from .specs import FALLBACK_SEED, IMAGENET_MEAN, IMAGENET_STD, RENDER_SCALE, FeatureSpec
 
 
 def build_layers(spec: FeatureSpec) -> nn.Sequential:
@@ -63,8 +67,13 @@ class FeatureExtractor(nn.Module):
     ``fingerprint`` changes whenever the spec, the scale or a parameter does (a cache key).
     """
 
-    def __init__(self, spec: FeatureSpec, weights: ResolvedWeights, scale: float = RENDER_SCALE,
-                 autocast: torch.dtype | None = None) -> None:
+    def __init__(
+        self,
+        spec: FeatureSpec,
+        weights: ResolvedWeights,
+        scale: float = RENDER_SCALE,
+        autocast: torch.dtype | None = None,
+    ) -> None:
         super().__init__()
         self.spec = spec
         self.scale = float(scale)
@@ -80,9 +89,13 @@ class FeatureExtractor(nn.Module):
         self.requires_grad_(False)
         self.eval()
         self.fingerprint = self._fingerprint()
-        self.info: dict[str, Any] = {**weights.info, "spec": spec.name, "channels": spec.out_channels,
-                                     "fingerprint": self.fingerprint,
-                                     "autocast": None if autocast is None else str(autocast).removeprefix("torch.")}
+        self.info: dict[str, Any] = {
+            **weights.info,
+            "spec": spec.name,
+            "channels": spec.out_channels,
+            "fingerprint": self.fingerprint,
+            "autocast": None if autocast is None else str(autocast).removeprefix("torch."),
+        }
 
     def _fingerprint(self) -> str:
         """Short SHA-256 of the spec, the scale and every parameter's bytes."""

@@ -7,6 +7,7 @@ channels (eps 1e-10), squared difference, the learned 1x1 linear head, spatial m
 five layers. Only the AlexNet variant is supported: the VGG head exists in ``shared/weights`` but
 the VGG-16 backbone it needs is there only up to relu2_2.
 """
+
 from __future__ import annotations
 
 import importlib.util
@@ -32,11 +33,18 @@ EPS = 1e-10
 def alexnet_features() -> nn.Sequential:
     """torchvision AlexNet ``features`` up to relu5 (indices 0-11)."""
     return nn.Sequential(
-        nn.Conv2d(3, 64, 11, stride=4, padding=2), nn.ReLU(), nn.MaxPool2d(3, 2),
-        nn.Conv2d(64, 192, 5, padding=2), nn.ReLU(), nn.MaxPool2d(3, 2),
-        nn.Conv2d(192, 384, 3, padding=1), nn.ReLU(),
-        nn.Conv2d(384, 256, 3, padding=1), nn.ReLU(),
-        nn.Conv2d(256, 256, 3, padding=1), nn.ReLU(),
+        nn.Conv2d(3, 64, 11, stride=4, padding=2),
+        nn.ReLU(),
+        nn.MaxPool2d(3, 2),
+        nn.Conv2d(64, 192, 5, padding=2),
+        nn.ReLU(),
+        nn.MaxPool2d(3, 2),
+        nn.Conv2d(192, 384, 3, padding=1),
+        nn.ReLU(),
+        nn.Conv2d(384, 256, 3, padding=1),
+        nn.ReLU(),
+        nn.Conv2d(256, 256, 3, padding=1),
+        nn.ReLU(),
     )
 
 
@@ -46,8 +54,9 @@ class LPIPS(nn.Module):
     def __init__(self, backbone: dict[str, torch.Tensor], heads: dict[str, torch.Tensor]) -> None:
         super().__init__()
         self.features = alexnet_features()
-        self.features.load_state_dict({k.removeprefix("features."): v for k, v in backbone.items()
-                                       if k.startswith("features.")})
+        self.features.load_state_dict(
+            {k.removeprefix("features."): v for k, v in backbone.items() if k.startswith("features.")}
+        )
         self.heads = nn.ModuleList(nn.Conv2d(c, 1, 1, bias=False) for c in CHANNELS)
         for i, head in enumerate(self.heads):
             head.weight.data.copy_(heads[f"lin{i}.model.1.weight"])

@@ -1,7 +1,10 @@
 """Feature network specifications: layers, preprocessing and padding of each supported VGG, by name."""
+
 from __future__ import annotations
+
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
+
 if TYPE_CHECKING:
     pass
 
@@ -67,8 +70,10 @@ class FeatureSpec:
                 block, conv = block + 1, 0
             else:
                 conv += 1
-                out += [("conv", f"conv{block}_{conv}", channels, int(item)),
-                        ("relu", f"relu{block}_{conv}", int(item), int(item))]
+                out += [
+                    ("conv", f"conv{block}_{conv}", channels, int(item)),
+                    ("relu", f"relu{block}_{conv}", int(item), int(item)),
+                ]
                 channels = int(item)
         return tuple(out)
 

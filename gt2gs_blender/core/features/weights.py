@@ -9,6 +9,7 @@ VGG-19 marked ``fallback`` with a reason the caller must show (CLI, report, UI) 
 A file the user named, or that sits in a folder the user named, and cannot be used is an
 :class:`InputFileError`.
 """
+
 from __future__ import annotations
 
 import os
@@ -71,7 +72,7 @@ def search_dirs(weights_path: str | os.PathLike | None = None) -> list[tuple[Pat
         if not Path(env).is_dir():
             raise InputFileError(env, f"${ENV_VAR} names a folder that does not exist")
         dirs.append((Path(env), f"${ENV_VAR}"))
-    return dirs + [(hub_checkpoint_dir(), "torch hub cache")]
+    return [*dirs, (hub_checkpoint_dir(), "torch hub cache")]
 
 
 def find_weight_file(names: Sequence[str], weights_path: str | os.PathLike | None = None) -> Path | None:
@@ -105,7 +106,10 @@ def load_state_dict(path: str | os.PathLike) -> dict[str, torch.Tensor]:
 
 
 def resolve_weights(
-    preference: str = "auto", weights_path: str | os.PathLike | None = None, *, allow_download: bool = False,
+    preference: str = "auto",
+    weights_path: str | os.PathLike | None = None,
+    *,
+    allow_download: bool = False,
 ) -> ResolvedWeights:
     """The feature network's weights, in the documented order; see the module docstring.
 
@@ -119,8 +123,12 @@ def resolve_weights(
     if explicit is not None and explicit.is_file():
         return _from_file(explicit, specs, "explicit path", [])
     dirs = search_dirs(explicit)
-    notes = [f"{folder / name} {why}" for folder, _ in dirs for name, why in PARTIAL_FILES.items()
-             if (folder / name).is_file()]
+    notes = [
+        f"{folder / name} {why}"
+        for folder, _ in dirs
+        for name, why in PARTIAL_FILES.items()
+        if (folder / name).is_file()
+    ]
     for spec in specs:
         found = _first_file(spec.weight_files, dirs)
         if found is not None:
@@ -131,11 +139,16 @@ def resolve_weights(
     searched = ", ".join(f"{folder} ({origin})" for folder, origin in dirs)
     if preference != "auto":
         raise GT2GSError(f"{preference} weights not found ({'; '.join(notes)}; searched {searched})")
-    return ResolvedWeights(VGG19_NORM_RELU3, None, None, (
-        f"FALLBACK: randomly initialised VGG-19 (seed {FALLBACK_SEED}) - texture features are not ImageNet "
-        f"features and results will be weaker; {'; '.join(notes)}; searched {searched}. Put "
-        f"{VGG16_RELU3.weight_files[0]} in one of those folders or set ${ENV_VAR}."
-    ))
+    return ResolvedWeights(
+        VGG19_NORM_RELU3,
+        None,
+        None,
+        (
+            f"FALLBACK: randomly initialised VGG-19 (seed {FALLBACK_SEED}) - texture features are not ImageNet "
+            f"features and results will be weaker; {'; '.join(notes)}; searched {searched}. Put "
+            f"{VGG16_RELU3.weight_files[0]} in one of those folders or set ${ENV_VAR}."
+        ),
+    )
 
 
 def download_vgg16(allow_download: bool) -> Path:
@@ -174,8 +187,12 @@ def _from_file(path: Path, specs: Sequence[FeatureSpec], origin: str, notes: lis
             kept = {k: state_dict[k].clone() for k in expected}  # detach from the memory map
             reason = "; ".join([f"{spec.description}, from {path} ({origin})", *notes])
             return ResolvedWeights(spec, kept, path, reason)
-    convs = sorted(int(k.split(".")[1]) for k, v in state_dict.items()
-                   if k.startswith("features.") and k.endswith(".weight") and v.dim() == 4)
-    needs = ", ".join(f"{s.name} needs conv layers {sorted({int(k.split('.')[1]) for k in s.parameter_shapes()})}"
-                      for s in specs)
+    convs = sorted(
+        int(k.split(".")[1])
+        for k, v in state_dict.items()
+        if k.startswith("features.") and k.endswith(".weight") and v.dim() == 4
+    )
+    needs = ", ".join(
+        f"{s.name} needs conv layers {sorted({int(k.split('.')[1]) for k in s.parameter_shapes()})}" for s in specs
+    )
     raise InputFileError(path, f"holds conv layers features.{convs} (too few, or other shapes); {needs}")

@@ -7,9 +7,10 @@ bounds, uniformly in disparity (1/depth): forward-facing captures such as LLFF s
 range, and uniform-in-disparity puts as many points per pixel of parallax near as far. Their sizes
 come from their spacing on screen instead (see :func:`frustum_points`).
 """
+
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -18,7 +19,7 @@ from ..cameras.camera import Camera
 from ..scene.gaussians import GaussianScene
 
 INIT_OPACITY = 0.1
-KNN_CHUNK_ELEMENTS = 2 ** 24
+KNN_CHUNK_ELEMENTS = 2**24
 """Distances computed per chunk of query points (64 MiB of float32), so memory stays bounded."""
 
 
@@ -30,15 +31,21 @@ def knn_scales(points: torch.Tensor, k: int = 3) -> torch.Tensor:
     chunk = max(1, KNN_CHUNK_ELEMENTS // n)
     out = []
     for start in range(0, n, chunk):
-        queries = points[start:start + chunk]
+        queries = points[start : start + chunk]
         d2 = torch.cdist(queries, points).square_()
         d2[torch.arange(len(queries)), torch.arange(start, start + len(queries))] = torch.inf
         out.append(d2.topk(k, dim=1, largest=False).values.mean(dim=1))
     return torch.cat(out).clamp_min(1e-14).sqrt()
 
 
-def scene_from_points(points: torch.Tensor, colors: torch.Tensor, *, scales: torch.Tensor | None = None,
-                      sh_degree: int = 0, opacity: float = INIT_OPACITY) -> GaussianScene:
+def scene_from_points(
+    points: torch.Tensor,
+    colors: torch.Tensor,
+    *,
+    scales: torch.Tensor | None = None,
+    sh_degree: int = 0,
+    opacity: float = INIT_OPACITY,
+) -> GaussianScene:
     """Isotropic Gaussians at ``points`` (N,3) with RGB ``colors`` (N,3) in [0,1], of size ``scales``
     (N,) or, by default, sized by their 3 nearest neighbours."""
     n = points.shape[0]
@@ -48,8 +55,13 @@ def scene_from_points(points: torch.Tensor, colors: torch.Tensor, *, scales: tor
 
 
 def frustum_points(
-    cameras: Sequence[Camera], near: Sequence[float], far: Sequence[float], count: int, *,
-    images: torch.Tensor | None = None, generator: torch.Generator | None = None,
+    cameras: Sequence[Camera],
+    near: Sequence[float],
+    far: Sequence[float],
+    count: int,
+    *,
+    images: torch.Tensor | None = None,
+    generator: torch.Generator | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """``count`` random points (float32) seen by the cameras, each on the ray of a random pixel of a
     random view at a depth uniform in disparity between that view's ``near`` and ``far``.
@@ -62,8 +74,10 @@ def frustum_points(
         raise ValueError("frustum_points needs one near and one far bound per camera, and a camera")
     view = torch.randint(len(cameras), (count,), generator=generator)
     u, v, t = torch.rand(3, count, generator=generator, dtype=torch.float64)
-    params = torch.tensor([[c.width, c.height, c.fx, c.fy, c.cx, c.cy, 1.0 / f, 1.0 / n]
-                           for c, n, f in zip(cameras, near, far)], dtype=torch.float64)[view]
+    params = torch.tensor(
+        [[c.width, c.height, c.fx, c.fy, c.cx, c.cy, 1.0 / f, 1.0 / n] for c, n, f in zip(cameras, near, far)],
+        dtype=torch.float64,
+    )[view]
     width, height, fx, fy, cx, cy, disp_far, disp_near = params.unbind(-1)
     px, py = u * width, v * height
     depth = 1.0 / (disp_far + t * (disp_near - disp_far))

@@ -8,14 +8,15 @@ learn, so the Geometry Preservation Branch can run its correction phases through
 :func:`fit_llff` is the reconstruction benchmark: every 8th view held out, random initialisation,
 INRIA output folder.
 """
+
 from __future__ import annotations
 
 import json
 import math
 import time
+from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import cv2
 import numpy as np
@@ -23,18 +24,18 @@ import torch
 
 from ..atomic import atomic_write
 from ..cameras.camera import Camera, camera_extent
-from ..cameras.llff import load_llff
 from ..cameras.cameras_json import save_cameras_json
-from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, reset_opacity
+from ..cameras.llff import load_llff
 from ..errors import InputFileError
-from .init import frustum_points, scene_from_points
-from ..train.optim import PARAM_NAMES, GaussianAdam, LearningRates
-from ..scene.ply_write import write_ply
+from ..progress import ProgressCallback, Tracker
 from ..render import RenderOutput, render
 from ..scene.gaussians import GaussianScene
-from ..train.ssim import ssim
+from ..scene.ply_write import write_ply
+from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, reset_opacity
+from ..train.optim import PARAM_NAMES, GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
-from ..progress import ProgressCallback, Tracker
+from ..train.ssim import ssim
+from .init import frustum_points, scene_from_points
 
 LLFF_HOLDOUT = 8
 """LLFF protocol: views 0, 8, 16, ... are the test set."""
@@ -79,9 +80,17 @@ class Trainer:
     """
 
     def __init__(
-        self, scene: GaussianScene, cameras: Sequence[Camera], images: torch.Tensor, config: FitConfig, *,
-        extent: float | None = None, trainable: Iterable[str] = PARAM_NAMES, frozen: torch.Tensor | None = None,
-        attachments: dict[str, torch.Tensor] | None = None, render_colors: str | None = None,
+        self,
+        scene: GaussianScene,
+        cameras: Sequence[Camera],
+        images: torch.Tensor,
+        config: FitConfig,
+        *,
+        extent: float | None = None,
+        trainable: Iterable[str] = PARAM_NAMES,
+        frozen: torch.Tensor | None = None,
+        attachments: dict[str, torch.Tensor] | None = None,
+        render_colors: str | None = None,
     ) -> None:
         if len(cameras) != images.shape[0]:
             raise ValueError(f"{len(cameras)} cameras but {images.shape[0]} images")
@@ -89,8 +98,13 @@ class Trainer:
         self.extent = camera_extent(cameras) if extent is None else extent
         if not self.extent > 0:
             raise ValueError("the scene extent is 0 (a single camera?); pass extent explicitly")
-        self.opt = GaussianAdam(scene, config.lrs.at(0, config.iterations, self.extent), trainable=trainable,
-                                frozen=frozen, attachments=attachments)
+        self.opt = GaussianAdam(
+            scene,
+            config.lrs.at(0, config.iterations, self.extent),
+            trainable=trainable,
+            frozen=frozen,
+            attachments=attachments,
+        )
         self.render_colors = render_colors
         self.stats = DensityStats(len(scene), config.densify.grad_source, device=scene.device)
         self.background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
@@ -112,8 +126,11 @@ class Trainer:
             if math.isfinite(loss):
                 smoothed = loss if smoothed is None else 0.9 * smoothed + 0.1 * loss
             if self.iteration % every == 0 or self.iteration == self.config.iterations:
-                tracker.tell(self.iteration, self.config.iterations,
-                             f"loss {smoothed or math.nan:.4f}, {len(self.scene):,} Gaussians")
+                tracker.tell(
+                    self.iteration,
+                    self.config.iterations,
+                    f"loss {smoothed or math.nan:.4f}, {len(self.scene):,} Gaussians",
+                )
         return self.scene.detach()
 
     def step(self) -> float:
@@ -123,8 +140,12 @@ class Trainer:
         view = self._next_view()
         out = self._render([self.cameras[view]])
         in_window = self.iteration < cfg.densify_end
-        track_position = in_window and cfg.densify.grad_source == "position" and out.projection is not None \
+        track_position = (
+            in_window
+            and cfg.densify.grad_source == "position"
+            and out.projection is not None
             and out.projection.means2d.requires_grad
+        )
         if track_position:
             out.projection.means2d.retain_grad()
         loss = reconstruction_loss(out.colors[0], self.images[view], cfg.lambda_dssim)
@@ -142,11 +163,21 @@ class Trainer:
     def _render(self, cameras: Sequence[Camera]) -> RenderOutput:
         """Render with the active SH degree (or the attachment colours) over the background."""
         cfg = self.config
-        degree = self.scene.sh_degree if cfg.sh_interval <= 0 else min(self.scene.sh_degree,
-                                                                        self.iteration // cfg.sh_interval)
+        degree = (
+            self.scene.sh_degree
+            if cfg.sh_interval <= 0
+            else min(self.scene.sh_degree, self.iteration // cfg.sh_interval)
+        )
         colors = None if self.render_colors is None else self.opt.attachments[self.render_colors]
-        return render(self.scene, cameras, colors=colors, background=self.background, render_depth=False,
-                      backend=cfg.backend, sh_degree=degree)
+        return render(
+            self.scene,
+            cameras,
+            colors=colors,
+            background=self.background,
+            render_depth=False,
+            backend=cfg.backend,
+            sh_degree=degree,
+        )
 
     def _next_view(self) -> int:
         """Views in random order without repetition, reshuffled when all were used (as 3DGS)."""
@@ -157,8 +188,14 @@ class Trainer:
     def _density_control(self) -> None:
         cfg, i = self.config, self.iteration
         if i > cfg.densify_from and i % cfg.densify_every == 0:
-            densify_and_prune(self.opt, self.stats, cfg.densify, self.extent,
-                              prune_large=i > cfg.opacity_reset_every, generator=self.generator)
+            densify_and_prune(
+                self.opt,
+                self.stats,
+                cfg.densify,
+                self.extent,
+                prune_large=i > cfg.opacity_reset_every,
+                generator=self.generator,
+            )
         if cfg.opacity_reset_every > 0 and i % cfg.opacity_reset_every == 0:
             reset_opacity(self.opt, cfg.densify.reset_opacity)
 
@@ -175,8 +212,14 @@ class Metrics:
     per_view: list[tuple[float, float]]
 
 
-def evaluate(scene: GaussianScene, cameras: Sequence[Camera], images: torch.Tensor, *,
-             background: Sequence[float] = (0.0, 0.0, 0.0), backend: str = "auto") -> Metrics:
+def evaluate(
+    scene: GaussianScene,
+    cameras: Sequence[Camera],
+    images: torch.Tensor,
+    *,
+    background: Sequence[float] = (0.0, 0.0, 0.0),
+    backend: str = "auto",
+) -> Metrics:
     """PSNR and SSIM of renders (clamped to [0, 1]) against ``images``, view by view."""
     per_view = []
     with torch.no_grad():
@@ -250,8 +293,14 @@ def write_inria(out_dir: Path, scene: GaussianScene, cameras: Sequence[Camera], 
 
 
 def fit_llff(
-    scene_dir: str | Path, out_dir: str | Path, *, downscale: int = 8, config: FitConfig = FitConfig(),
-    n_points: int = DEFAULT_POINTS, sh_degree: int = DEFAULT_SH_DEGREE, progress: ProgressCallback | None = None,
+    scene_dir: str | Path,
+    out_dir: str | Path,
+    *,
+    downscale: int = 8,
+    config: FitConfig = FitConfig(),
+    n_points: int = DEFAULT_POINTS,
+    sh_degree: int = DEFAULT_SH_DEGREE,
+    progress: ProgressCallback | None = None,
 ) -> FitReport:
     """Reconstruct an LLFF capture from random points: train on all views but every 8th, report
     PSNR/SSIM on those, and write the result in the INRIA layout to ``out_dir``."""
@@ -262,19 +311,36 @@ def fit_llff(
     images = load_images(data.image_paths, cameras[0].width, cameras[0].height)
     train, test = llff_split(len(cameras))
     generator = torch.Generator().manual_seed(config.seed)
-    points, colors, scales = frustum_points([cameras[i] for i in train], data.bounds[train, 0], data.bounds[train, 1],
-                                    n_points, images=images[train], generator=generator)
-    trainer = Trainer(scene_from_points(points, colors, scales=scales, sh_degree=sh_degree), [cameras[i] for i in train],
-                      images[train], config)
+    points, colors, scales = frustum_points(
+        [cameras[i] for i in train],
+        data.bounds[train, 0],
+        data.bounds[train, 1],
+        n_points,
+        images=images[train],
+        generator=generator,
+    )
+    trainer = Trainer(
+        scene_from_points(points, colors, scales=scales, sh_degree=sh_degree),
+        [cameras[i] for i in train],
+        images[train],
+        config,
+    )
     train_start = time.perf_counter()
     scene = trainer.run(progress)
     train_seconds = time.perf_counter() - train_start
-    metrics = evaluate(scene, [cameras[i] for i in test], images[test], background=config.background,
-                       backend=config.backend)
+    metrics = evaluate(
+        scene, [cameras[i] for i in test], images[test], background=config.background, backend=config.backend
+    )
     out_dir.mkdir(parents=True, exist_ok=True)
     write_inria(out_dir, scene, cameras, config.iterations)
     return FitReport(
-        test_psnr=metrics.psnr, test_ssim=metrics.ssim, seconds=time.perf_counter() - start,
-        n_gaussians=len(scene), iterations=config.iterations, train_seconds=train_seconds,
-        train_views=len(train), test_views=len(test), skipped_steps=trainer.opt.skipped,
+        test_psnr=metrics.psnr,
+        test_ssim=metrics.ssim,
+        seconds=time.perf_counter() - start,
+        n_gaussians=len(scene),
+        iterations=config.iterations,
+        train_seconds=train_seconds,
+        train_views=len(train),
+        test_views=len(test),
+        skipped_steps=trainer.opt.skipped,
     )

@@ -7,11 +7,12 @@ alpha is clamped to 0.99; a pixel stops before the Gaussian that would bring its
 below 1e-4. Backends: ``cpu`` (C++/OpenMP kernel), ``torch`` (portable, CPU or CUDA), ``gsplat``
 (CUDA kernels when installed).
 """
+
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Sequence
 
 import torch
 
@@ -29,9 +30,9 @@ class RenderOutput:
     """Renders of B cameras. ``projection`` holds the visible (camera, Gaussian) entries with their
     differentiable 2D means (for densification statistics); None for the gsplat backend."""
 
-    colors: torch.Tensor          # (B, H, W, D) composited over the background
-    depths: torch.Tensor | None   # (B, H, W) expected depth sum T*alpha*z (not divided by alpha)
-    alphas: torch.Tensor          # (B, H, W)
+    colors: torch.Tensor  # (B, H, W, D) composited over the background
+    depths: torch.Tensor | None  # (B, H, W) expected depth sum T*alpha*z (not divided by alpha)
+    alphas: torch.Tensor  # (B, H, W)
     backend: str
     projection: Projection | None = None
 
@@ -90,16 +91,38 @@ def rasterization(
     n_cams = viewmats.shape[0]
     if name == "gsplat":
         image, alpha = gsplat_backend.rasterize(
-            means, quats, scales, opacities, colors, viewmats, ks, width, height, sh_degree=sh_degree,
-            near_plane=near_plane, far_plane=far_plane, with_depth=render_depth,
+            means,
+            quats,
+            scales,
+            opacities,
+            colors,
+            viewmats,
+            ks,
+            width,
+            height,
+            sh_degree=sh_degree,
+            near_plane=near_plane,
+            far_plane=far_plane,
+            with_depth=render_depth,
         )
         proj = None
     else:
         backend_module = cpu_backend if name == "cpu" else torch_backend
         projector = cpu_backend.project if name == "cpu" else project
         proj = projector(
-            means, quats, scales, opacities, colors, viewmats, ks, width, height, sh_degree=sh_degree,
-            near_plane=near_plane, far_plane=far_plane, with_depth=render_depth,
+            means,
+            quats,
+            scales,
+            opacities,
+            colors,
+            viewmats,
+            ks,
+            width,
+            height,
+            sh_degree=sh_degree,
+            near_plane=near_plane,
+            far_plane=far_plane,
+            with_depth=render_depth,
         )
         image, alpha = backend_module.composite(proj, n_cams, width, height)
     rgb, depth = (image[..., :-1], image[..., -1]) if render_depth else (image, None)
@@ -134,6 +157,17 @@ def render(
     if background is not None:
         bg = torch.as_tensor(background, dtype=scene.dtype, device=scene.device)
     return rasterization(
-        scene.means, scene.quats, scene.scales, scene.opacities, colors_in, viewmats, ks, width, height,
-        sh_degree=degree_in, backgrounds=bg, render_depth=render_depth, backend=backend,
+        scene.means,
+        scene.quats,
+        scene.scales,
+        scene.opacities,
+        colors_in,
+        viewmats,
+        ks,
+        width,
+        height,
+        sh_degree=degree_in,
+        backgrounds=bg,
+        render_depth=render_depth,
+        backend=backend,
     )

@@ -1,4 +1,5 @@
 """Tile lists: for every 8x8 tile of every camera, the entries that touch it, front to back."""
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -10,7 +11,7 @@ import torch
 class TileBins:
     """``pair_gauss[offsets[t]:offsets[t+1]]`` are the entries of tile t (camera-major, row-major)."""
 
-    offsets: torch.Tensor     # (n_tiles + 1,) int32
+    offsets: torch.Tensor  # (n_tiles + 1,) int32
     pair_gauss: torch.Tensor  # (P,) int32 entry indices
     pair_tile: torch.Tensor | None = None  # (P,) int32 tile of each slot (portable binning only)
 

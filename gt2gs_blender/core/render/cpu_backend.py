@@ -1,4 +1,5 @@
 """The fast CPU backend: a small C++/OpenMP kernel, compiled once per content (see kernel_cache)."""
+
 from __future__ import annotations
 
 import logging
@@ -70,8 +71,19 @@ class _Composite(torch.autograd.Function):
         if grad_alpha is None:
             grad_alpha = torch.zeros_like(final_t)
         g_means, g_conics, g_colors, g_op = load_kernel().backward(
-            means2d, conics, colors, opacities, offsets, pairs, final_t, pixel_end,
-            grad_image, grad_alpha, n_cams, width, height,
+            means2d,
+            conics,
+            colors,
+            opacities,
+            offsets,
+            pairs,
+            final_t,
+            pixel_end,
+            grad_image,
+            grad_alpha,
+            n_cams,
+            width,
+            height,
         )
         return g_means, g_conics, g_colors, g_op, None, None, None, None
 
@@ -90,15 +102,33 @@ class _Project(torch.autograd.Function):
         kernel = load_kernel()
         sh_in = sh if sh_degree >= 0 else means.new_zeros(0)
         means2d, conics, rgb, depth, radii, rects, valid = kernel.project_forward(
-            means.detach(), quats.detach(), scales.detach(), opacities.detach(), sh_in.detach(), viewmats, ks,
-            width, height, near, far, sh_degree,
+            means.detach(),
+            quats.detach(),
+            scales.detach(),
+            opacities.detach(),
+            sh_in.detach(),
+            viewmats,
+            ks,
+            width,
+            height,
+            near,
+            far,
+            sh_degree,
         )
         cam_ids, gauss_ids = valid.nonzero(as_tuple=True)
         ctx.save_for_backward(means, quats, scales, sh_in, viewmats, ks, cam_ids, gauss_ids)
         ctx.config = (width, height, sh_degree)
         ctx.mark_non_differentiable(cam_ids, gauss_ids, radii, rects)
-        return (means2d[cam_ids, gauss_ids], conics[cam_ids, gauss_ids], rgb[cam_ids, gauss_ids],
-                depth[cam_ids, gauss_ids], cam_ids, gauss_ids, radii[cam_ids, gauss_ids], rects[cam_ids, gauss_ids])
+        return (
+            means2d[cam_ids, gauss_ids],
+            conics[cam_ids, gauss_ids],
+            rgb[cam_ids, gauss_ids],
+            depth[cam_ids, gauss_ids],
+            cam_ids,
+            gauss_ids,
+            radii[cam_ids, gauss_ids],
+            rects[cam_ids, gauss_ids],
+        )
 
     @staticmethod
     def backward(ctx, g_means2d, g_conics, g_rgb, g_depth, *_):
@@ -111,26 +141,67 @@ class _Project(torch.autograd.Function):
         g_rgb = means.new_zeros(zeros["rgb"]) if g_rgb is None else g_rgb
         g_depth = means.new_zeros(zeros["d"]) if g_depth is None else g_depth
         gm, gq, gs, gsh = load_kernel().project_backward(
-            means.detach(), quats.detach(), scales.detach(), sh_in.detach(), viewmats, ks, width, height, sh_degree,
-            cam_ids, gauss_ids, g_means2d, g_conics, g_rgb, g_depth,
+            means.detach(),
+            quats.detach(),
+            scales.detach(),
+            sh_in.detach(),
+            viewmats,
+            ks,
+            width,
+            height,
+            sh_degree,
+            cam_ids,
+            gauss_ids,
+            g_means2d,
+            g_conics,
+            g_rgb,
+            g_depth,
         )
         return gm, gq, gs, None, gsh if sh_degree >= 0 else None, None, None, None, None, None, None, None
 
 
 def project(
-    means, quats, scales, opacities, colors, viewmats, ks, width, height, *, sh_degree, near_plane, far_plane,
+    means,
+    quats,
+    scales,
+    opacities,
+    colors,
+    viewmats,
+    ks,
+    width,
+    height,
+    *,
+    sh_degree,
+    near_plane,
+    far_plane,
     with_depth,
 ) -> Projection:
     """The C++ twin of projection.project (same entries, same rules)."""
     degree = -1 if sh_degree is None else sh_degree
     means2d, conics, rgb, depth, cam_ids, gauss_ids, radii, rects = _Project.apply(
-        means, quats, scales, opacities, colors, viewmats.detach(), ks.detach(), width, height,
-        near_plane, far_plane, degree,
+        means,
+        quats,
+        scales,
+        opacities,
+        colors,
+        viewmats.detach(),
+        ks.detach(),
+        width,
+        height,
+        near_plane,
+        far_plane,
+        degree,
     )
     if sh_degree is None:
         rgb = colors[gauss_ids]
     return Projection(
-        cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d, conics=conics, depths=depth,
-        opacities=opacities[gauss_ids], colors=with_depth_channel(rgb, depth, with_depth), tile_bbox=rects,
+        cam_ids=cam_ids,
+        gauss_ids=gauss_ids,
+        means2d=means2d,
+        conics=conics,
+        depths=depth,
+        opacities=opacities[gauss_ids],
+        colors=with_depth_channel(rgb, depth, with_depth),
+        tile_bbox=rects,
         radii=radii,
     )

@@ -4,6 +4,7 @@ Produces one *entry* per visible (camera, Gaussian) pair: 2D mean, conic, depth,
 and the inclusive range of 8x8 tiles whose pixel centres can see alpha >= 1/255 from it. Every
 backend composites these same entries, so they share culling and footprint rules exactly.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -26,15 +27,15 @@ bounds the footprints of Gaussians far off-screen."""
 class Projection:
     """Visible entries of all cameras; tensors are (M, ...) and differentiable where float."""
 
-    cam_ids: torch.Tensor      # (M,) int64, camera of each entry
-    gauss_ids: torch.Tensor    # (M,) int64, Gaussian of each entry
-    means2d: torch.Tensor      # (M, 2) pixels, pixel centres at +0.5
-    conics: torch.Tensor       # (M, 3) inverse 2D covariance (a, b, c)
-    depths: torch.Tensor       # (M,) camera-space z
-    opacities: torch.Tensor    # (M,)
-    colors: torch.Tensor       # (M, D)
-    tile_bbox: torch.Tensor    # (M, 4) int32 inclusive tile rectangle x0, y0, x1, y1
-    radii: torch.Tensor        # (M, 2) half-extents in pixels of the alpha >= 1/255 footprint
+    cam_ids: torch.Tensor  # (M,) int64, camera of each entry
+    gauss_ids: torch.Tensor  # (M,) int64, Gaussian of each entry
+    means2d: torch.Tensor  # (M, 2) pixels, pixel centres at +0.5
+    conics: torch.Tensor  # (M, 3) inverse 2D covariance (a, b, c)
+    depths: torch.Tensor  # (M,) camera-space z
+    opacities: torch.Tensor  # (M,)
+    colors: torch.Tensor  # (M, D)
+    tile_bbox: torch.Tensor  # (M, 4) int32 inclusive tile rectangle x0, y0, x1, y1
+    radii: torch.Tensor  # (M, 2) half-extents in pixels of the alpha >= 1/255 footprint
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:
@@ -49,7 +50,11 @@ def _covariances_3d(quats: torch.Tensor, scales: torch.Tensor) -> torch.Tensor:
 
 
 def _visible_pairs(
-    p_cam: torch.Tensor, ks: torch.Tensor, gaussians_ok: torch.Tensor, near: float, far: float,
+    p_cam: torch.Tensor,
+    ks: torch.Tensor,
+    gaussians_ok: torch.Tensor,
+    near: float,
+    far: float,
 ) -> torch.Tensor:
     """(camera, Gaussian) index pairs in front of the near plane with a chance of alpha >= 1/255.
 
@@ -76,9 +81,7 @@ def _jacobians(p: torch.Tensor, k: torch.Tensor, width: int, height: int) -> tor
     ty = z * torch.minimum(torch.maximum(y / z, -lim_y_neg), lim_y_pos)
     zero = torch.zeros_like(z)
     rz = 1.0 / z
-    return torch.stack(
-        [fx * rz, zero, -fx * tx * rz * rz, zero, fy * rz, -fy * ty * rz * rz], dim=-1
-    ).reshape(-1, 2, 3)
+    return torch.stack([fx * rz, zero, -fx * tx * rz * rz, zero, fy * rz, -fy * ty * rz * rz], dim=-1).reshape(-1, 2, 3)
 
 
 def _tile_rects(means2d: torch.Tensor, radii: torch.Tensor, width: int, height: int) -> torch.Tensor:
@@ -148,9 +151,15 @@ def project(
     cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam.index_select(0, idx)
     rgb = _entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
     return Projection(
-        cam_ids=cam_ids, gauss_ids=gauss_ids, means2d=means2d.index_select(0, idx), conics=conics,
-        depths=p_cam[:, 2], opacities=op.index_select(0, idx), colors=with_depth_channel(rgb, p_cam[:, 2], with_depth),
-        tile_bbox=rects[idx].contiguous(), radii=radii[idx],
+        cam_ids=cam_ids,
+        gauss_ids=gauss_ids,
+        means2d=means2d.index_select(0, idx),
+        conics=conics,
+        depths=p_cam[:, 2],
+        opacities=op.index_select(0, idx),
+        colors=with_depth_channel(rgb, p_cam[:, 2], with_depth),
+        tile_bbox=rects[idx].contiguous(),
+        radii=radii[idx],
     )
 
 
@@ -160,8 +169,12 @@ def with_depth_channel(rgb: torch.Tensor, depth: torch.Tensor, with_depth: bool)
 
 
 def _entry_colors(
-    colors: torch.Tensor, means: torch.Tensor, viewmats: torch.Tensor, cam_ids: torch.Tensor,
-    gauss_ids: torch.Tensor, sh_degree: int | None,
+    colors: torch.Tensor,
+    means: torch.Tensor,
+    viewmats: torch.Tensor,
+    cam_ids: torch.Tensor,
+    gauss_ids: torch.Tensor,
+    sh_degree: int | None,
 ) -> torch.Tensor:
     """Per-entry colours: given directly (N, D) or evaluated from SH (N, K, 3) for each view direction."""
     if sh_degree is None:
@@ -172,4 +185,4 @@ def _entry_colors(
     centers = -torch.einsum("bji,bj->bi", rot, trans)
     dirs = means.index_select(0, gauss_ids) - centers.index_select(0, cam_ids)
     dirs = dirs / dirs.norm(dim=-1, keepdim=True).clamp_min(1e-12)
-    return eval_sh(colors[:, :(sh_degree + 1) ** 2].index_select(0, gauss_ids), dirs, sh_degree)
+    return eval_sh(colors[:, : (sh_degree + 1) ** 2].index_select(0, gauss_ids), dirs, sh_degree)

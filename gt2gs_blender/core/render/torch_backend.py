@@ -10,6 +10,7 @@ the final colour minus what was composited so far, both dotted with the pixel's 
 only scalars per pixel are kept), so memory stays bounded by one chunk instead of growing with the
 number of (entry, pixel) pairs; chunk buffers are reused from chunk to chunk.
 """
+
 from __future__ import annotations
 
 import math
@@ -40,16 +41,16 @@ PAD_LOG2 = -4096.0
 class _Lists:
     """Everything both sweeps read: the non-empty tiles' lists and per-slot coefficients and colours."""
 
-    ids: torch.Tensor     # (A,) non-empty tiles
-    start: torch.Tensor   # (A,) first slot of each tile's list
-    count: torch.Tensor   # (A,) list lengths
-    coefs: torch.Tensor   # (6, P + 1) log2-alpha coefficients over the basis; column P = padding
+    ids: torch.Tensor  # (A,) non-empty tiles
+    start: torch.Tensor  # (A,) first slot of each tile's list
+    count: torch.Tensor  # (A,) list lengths
+    coefs: torch.Tensor  # (6, P + 1) log2-alpha coefficients over the basis; column P = padding
     colors: torch.Tensor  # (P + 1, D) colour of each slot; row P = padding
-    basis: torch.Tensor   # (6, 64)
-    pairs: torch.Tensor   # (P,) entry of each slot
+    basis: torch.Tensor  # (6, 64)
+    pairs: torch.Tensor  # (P,) entry of each slot
     rel_means: torch.Tensor  # (2, P) each slot's 2D mean relative to its tile's centre
-    clamp: bool           # some opacity can reach ALPHA_MAX
-    alpha_cut: float      # alpha > alpha_cut  <=>  alpha >= ALPHA_MIN in this dtype
+    clamp: bool  # some opacity can reach ALPHA_MAX
+    alpha_cut: float  # alpha > alpha_cut  <=>  alpha >= ALPHA_MIN in this dtype
 
     @property
     def pad(self) -> int:
@@ -83,7 +84,11 @@ def _per_slot(values: torch.Tensor, pairs: torch.Tensor) -> list[torch.Tensor]:
 
 
 def _min_over_tile(
-    xi: torch.Tensor, eta: torch.Tensor, a: torch.Tensor, b: torch.Tensor, c: torch.Tensor,
+    xi: torch.Tensor,
+    eta: torch.Tensor,
+    a: torch.Tensor,
+    b: torch.Tensor,
+    c: torch.Tensor,
 ) -> torch.Tensor:
     """Smallest a dx^2 + 2b dx dy + c dy^2 over the square of pixel-centre offsets (dx, dy) =
     (xi - u, eta - v), |u|, |v| <= 3.5: 0 when it holds the centre, else the least of its 4 edges."""
@@ -137,8 +142,14 @@ def _lists(means2d, conics, colors, opacities, bins: TileBins, tiles_x: int, til
     ids = (count > 0).nonzero().squeeze(1)
     start = torch.cumsum(count, 0) - count
     return _Lists(
-        ids=ids, start=start[ids], count=count[ids], coefs=coefs, colors=slot_colors,
-        basis=_basis(dtype, device), pairs=pairs, rel_means=torch.stack([xi, eta]).to(dtype),
+        ids=ids,
+        start=start[ids],
+        count=count[ids],
+        coefs=coefs,
+        colors=slot_colors,
+        basis=_basis(dtype, device),
+        pairs=pairs,
+        rel_means=torch.stack([xi, eta]).to(dtype),
         clamp=bool(opacities.numel()) and bool(opacities.detach().max() >= ALPHA_MAX * (1 - 1e-4)),
         alpha_cut=_just_below(ALPHA_MIN, dtype),
     )
@@ -165,12 +176,12 @@ class _Workspace:
 class _Chunk:
     """One depth chunk of the active tiles, entries along dim 1, pixels along dim 2."""
 
-    slots: torch.Tensor      # (A*K,) list slot of each entry (the padding slot past a list's end)
-    alpha: torch.Tensor      # (A, K, 64) alpha; 0 below 1/255, when padded, and from a pixel's stop on
+    slots: torch.Tensor  # (A*K,) list slot of each entry (the padding slot past a list's end)
+    alpha: torch.Tensor  # (A, K, 64) alpha; 0 below 1/255, when padded, and from a pixel's stop on
     one_minus: torch.Tensor  # (A, K, 64) 1 - alpha before the stop cut (only met by zero alphas after it)
-    weight: torch.Tensor     # (A, K, 64) alpha * transmittance in front (0 for done pixels)
-    t_after: torch.Tensor    # (A, 64) transmittance behind the chunk (unchanged for done pixels)
-    done: torch.Tensor       # (A, 64) pixels finished by the end of the chunk
+    weight: torch.Tensor  # (A, K, 64) alpha * transmittance in front (0 for done pixels)
+    t_after: torch.Tensor  # (A, 64) transmittance behind the chunk (unchanged for done pixels)
+    done: torch.Tensor  # (A, 64) pixels finished by the end of the chunk
 
 
 def chunk_size(active_tiles: int) -> int:
@@ -201,8 +212,9 @@ def _cumsum(x: torch.Tensor, seed: torch.Tensor, out: torch.Tensor) -> None:
         torch.add(out[:, k - 1], x[:, k], out=out[:, k])
 
 
-def _chunk(lists: _Lists, ws: _Workspace, rows: torch.Tensor, j: int, size: int, t_run: torch.Tensor,
-           done: torch.Tensor) -> _Chunk:
+def _chunk(
+    lists: _Lists, ws: _Workspace, rows: torch.Tensor, j: int, size: int, t_run: torch.Tensor, done: torch.Tensor
+) -> _Chunk:
     """Alphas, transmittances and weights of entries j..j+size of the tiles ``rows``."""
     n = rows.numel()
     pos = j + torch.arange(size, device=rows.device)
@@ -214,7 +226,7 @@ def _chunk(lists: _Lists, ws: _Workspace, rows: torch.Tensor, j: int, size: int,
         alpha.clamp_max_(ALPHA_MAX)
     F.threshold_(alpha, lists.alpha_cut, 0.0)
     one_minus = torch.sub(alpha.new_ones(()), alpha, out=ws.get("one_minus", n, size, PIX))
-    trans = ws.get("trans", n, size + 1, PIX)   # trans[:, k]: transmittance in front of entry k
+    trans = ws.get("trans", n, size + 1, PIX)  # trans[:, k]: transmittance in front of entry k
     trans[:, 0].copy_(t_run).masked_fill_(done, 0.0)
     weight = ws.get("weight", n, size, PIX)
     _transmittance(one_minus, trans, weight)
@@ -230,8 +242,7 @@ def _chunk(lists: _Lists, ws: _Workspace, rows: torch.Tensor, j: int, size: int,
         alpha[a, :, p] = alpha[a, :, p] * keep
         t_after[a, p] = torch.where(keep, t[:, 1:], t[:, :1]).amin(dim=1)
     torch.mul(alpha, trans[:, :size], out=weight)
-    return _Chunk(slots=slots, alpha=alpha, one_minus=one_minus, weight=weight, t_after=t_after,
-                  done=done | stopping)
+    return _Chunk(slots=slots, alpha=alpha, one_minus=one_minus, weight=weight, t_after=t_after, done=done | stopping)
 
 
 def _sweep(lists: _Lists, fn) -> None:
@@ -327,14 +338,20 @@ def _entry_grads(conics, opacities, pairs, rel_means, slot_grads, n_entries: int
     cu = a * xi + b * eta
     cv = b * xi + c * eta
     grads = slot_grads.new_zeros(slot_grads.shape[0], n_entries)
-    grads[:6].index_add_(1, pairs, torch.stack([
-        a * su + b * sv - cu * s0,
-        b * su + c * sv - cv * s0,
-        xi * su - 0.5 * (xi * xi * s0 + suu),
-        eta * su + xi * sv - xi * eta * s0 - suv,
-        eta * sv - 0.5 * (eta * eta * s0 + svv),
-        s0 / opacities.detach().index_select(0, pairs),
-    ]))
+    grads[:6].index_add_(
+        1,
+        pairs,
+        torch.stack(
+            [
+                a * su + b * sv - cu * s0,
+                b * su + c * sv - cv * s0,
+                xi * su - 0.5 * (xi * xi * s0 + suu),
+                eta * su + xi * sv - xi * eta * s0 - suv,
+                eta * sv - 0.5 * (eta * eta * s0 + svv),
+                s0 / opacities.detach().index_select(0, pairs),
+            ]
+        ),
+    )
     grads[6:].index_add_(1, pairs, slot_grads[6:])
     return grads
 

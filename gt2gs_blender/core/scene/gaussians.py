@@ -4,10 +4,11 @@ Raw parameters are what optimisers train and what INRIA PLY files store: log-sca
 un-normalised quaternions (w, x, y, z) and SH coefficients. Activations live here so every module
 agrees on them.
 """
+
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
-from typing import Iterable
 
 import numpy as np
 import torch
@@ -41,7 +42,11 @@ class GaussianScene:
     def __post_init__(self) -> None:
         n = self.means.shape[0]
         expected = {
-            "means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,), "sh_dc": (n, 3),
+            "means": (n, 3),
+            "quats": (n, 4),
+            "log_scales": (n, 3),
+            "opacity_logits": (n,),
+            "sh_dc": (n, 3),
         }
         for name, shape in expected.items():
             actual = tuple(getattr(self, name).shape)
@@ -65,7 +70,7 @@ class GaussianScene:
         colors: torch.Tensor,
         quats: torch.Tensor | None = None,
         sh_degree: int = 0,
-    ) -> "GaussianScene":
+    ) -> GaussianScene:
         """Build a scene from activated values: linear scales, opacities in (0,1), RGB in [0,1]."""
         n = means.shape[0]
         dtype, device = means.dtype, means.device
@@ -138,15 +143,19 @@ class GaussianScene:
     def tensors(self) -> dict[str, torch.Tensor]:
         """The trainable parameter tensors by name."""
         return {
-            "means": self.means, "quats": self.quats, "log_scales": self.log_scales,
-            "opacity_logits": self.opacity_logits, "sh_dc": self.sh_dc, "sh_rest": self.sh_rest,
+            "means": self.means,
+            "quats": self.quats,
+            "log_scales": self.log_scales,
+            "opacity_logits": self.opacity_logits,
+            "sh_dc": self.sh_dc,
+            "sh_rest": self.sh_rest,
         }
 
-    def map_tensors(self, fn) -> "GaussianScene":
+    def map_tensors(self, fn) -> GaussianScene:
         """A new scene with ``fn`` applied to every parameter tensor (extras untouched)."""
         return replace(self, **{k: fn(v) for k, v in self.tensors().items()})
 
-    def subset(self, index: torch.Tensor | np.ndarray | slice) -> "GaussianScene":
+    def subset(self, index: torch.Tensor | np.ndarray | slice) -> GaussianScene:
         """The Gaussians selected by a boolean mask, an index array or a slice."""
         if isinstance(index, torch.Tensor):
             np_index = index.detach().cpu().numpy()
@@ -156,22 +165,25 @@ class GaussianScene:
             t_index = torch.from_numpy(index).to(self.device)
         else:
             np_index = t_index = index
-        return replace(self, **{k: v[t_index] for k, v in self.tensors().items()},
-                       extras={k: v[np_index] for k, v in self.extras.items()})
+        return replace(
+            self,
+            **{k: v[t_index] for k, v in self.tensors().items()},
+            extras={k: v[np_index] for k, v in self.extras.items()},
+        )
 
-    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> "GaussianScene":
+    def to(self, device: torch.device | str | None = None, dtype: torch.dtype | None = None) -> GaussianScene:
         """Move (and optionally cast floating) tensors; extras stay numpy."""
         return self.map_tensors(lambda t: t.to(device=device, dtype=dtype))
 
-    def detach(self) -> "GaussianScene":
+    def detach(self) -> GaussianScene:
         return self.map_tensors(lambda t: t.detach())
 
-    def clone(self) -> "GaussianScene":
+    def clone(self) -> GaussianScene:
         out = self.map_tensors(lambda t: t.detach().clone())
         out.extras = {k: v.copy() for k, v in self.extras.items()}
         return out
 
-    def with_sh_degree(self, degree: int) -> "GaussianScene":
+    def with_sh_degree(self, degree: int) -> GaussianScene:
         """Truncate or zero-pad the SH bands to ``degree``."""
         k_new = sh_coeff_count(degree) - 1
         k_old = self.sh_rest.shape[1]
@@ -221,9 +233,15 @@ def quats_to_rotmats(quats: torch.Tensor) -> torch.Tensor:
     w, x, y, z = normalize_quats(quats).unbind(-1)
     return torch.stack(
         [
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
         ],
         dim=-1,
-    ).reshape(quats.shape[:-1] + (3, 3))
+    ).reshape((*quats.shape[:-1], 3, 3))

@@ -4,6 +4,7 @@ Gaussian parameter, how the SH coefficients are laid out, and the DC colour cons
 Plain Python (no numpy or torch import), so the engine (``gaussians``), the PLY code (numpy only) and
 the Blender edge (before torch is installed) take these facts from one place.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterable

@@ -20,20 +20,35 @@ Choices:
   ``GaussianScene``) and ``write_ply`` takes either, so Blender can import and export splats before
   the engine's torch dependency is installed. ``read_ply`` returns torch tensors.
 """
+
 from __future__ import annotations
+
 import io
 import os
 import struct
 import warnings
+from collections.abc import Iterable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, BinaryIO, Iterable
+from typing import TYPE_CHECKING, BinaryIO
+
 import numpy as np
+
 from ..errors import PlyFormatError
+
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
 from .inria import REQUIRED, REST_PREFIX, core_groups, rest_per_channel, tensor_view
-from .ply_header import FORMATS, HEADER_LIMIT, PathLike, PlyElement, PlyHeader, SCALAR_TYPES, _open, _parse_header, _read
-
+from .ply_header import (
+    FORMATS,
+    HEADER_LIMIT,
+    SCALAR_TYPES,
+    PathLike,
+    PlyElement,
+    PlyHeader,
+    _open,
+    _parse_header,
+    _read,
+)
 
 _STRUCT_CHAR = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
 
@@ -56,8 +71,14 @@ class SplatArrays:
 
     def tensors(self) -> dict[str, np.ndarray]:
         """The parameter arrays by name (the keys of ``GaussianScene.tensors()``)."""
-        return {"means": self.means, "quats": self.quats, "log_scales": self.log_scales,
-                "opacity_logits": self.opacity_logits, "sh_dc": self.sh_dc, "sh_rest": self.sh_rest}
+        return {
+            "means": self.means,
+            "quats": self.quats,
+            "log_scales": self.log_scales,
+            "opacity_logits": self.opacity_logits,
+            "sh_dc": self.sh_dc,
+            "sh_rest": self.sh_rest,
+        }
 
 
 def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
@@ -67,8 +88,11 @@ def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
     from .gaussians import GaussianScene
 
     arrays = read_ply_arrays(path, drop_invalid=drop_invalid)
-    return GaussianScene(**{key: torch.from_numpy(values) for key, values in arrays.tensors().items()},
-                         extras=arrays.extras, ply_layout=arrays.ply_layout)
+    return GaussianScene(
+        **{key: torch.from_numpy(values) for key, values in arrays.tensors().items()},
+        extras=arrays.extras,
+        ply_layout=arrays.ply_layout,
+    )
 
 
 def read_ply_arrays(path: PathLike, *, drop_invalid: bool = False) -> SplatArrays:
@@ -93,18 +117,24 @@ def _check_gaussian_layout(path: PathLike, header: PlyHeader) -> int:
     props = header.vertex.properties
     lists = [p.name for p in props if p.list_count_type is not None]
     if lists:
-        raise PlyFormatError(path, f"vertex list properties are not supported ({', '.join(lists)}); "
-                                   "3DGS vertices have scalar properties only")
+        raise PlyFormatError(
+            path,
+            f"vertex list properties are not supported ({', '.join(lists)}); 3DGS vertices have scalar properties only",
+        )
     types = {p.name: p.type for p in props}
     missing = [name for name in REQUIRED if name not in types]
     if missing:
-        raise PlyFormatError(path, f"missing required properties {', '.join(missing)} "
-                                   "(not a 3D Gaussian Splatting PLY?)")
+        raise PlyFormatError(
+            path, f"missing required properties {', '.join(missing)} (not a 3D Gaussian Splatting PLY?)"
+        )
     rest = [p.name for p in props if p.name.startswith(REST_PREFIX)]
     k = rest_per_channel(rest)
     if k is None:
-        raise PlyFormatError(path, f"{len(rest)} f_rest properties do not form an SH degree 0-3 layout "
-                                   "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)")
+        raise PlyFormatError(
+            path,
+            f"{len(rest)} f_rest properties do not form an SH degree 0-3 layout "
+            "(expected f_rest_0 .. f_rest_<n-1> with n = 0, 9, 24 or 45)",
+        )
     not_float = [f"{name} ({types[name]})" for name in (*REQUIRED, *rest) if SCALAR_TYPES[types[name]][0] != "f"]
     if not_float:
         raise PlyFormatError(path, f"Gaussian properties must be float or double: {', '.join(not_float)}")
@@ -124,8 +154,10 @@ def _binary_vertices(path: PathLike, f: BinaryIO, header: PlyHeader) -> np.ndarr
     available = os.fstat(f.fileno()).st_size - offset
     if need > available:
         raise PlyFormatError(
-            path, f"truncated: the header promises {header.vertex_count} vertices ({need} bytes) but only "
-                  f"{max(available, 0)} bytes of vertex data follow (truncated file or wrong vertex count)")
+            path,
+            f"truncated: the header promises {header.vertex_count} vertices ({need} bytes) but only "
+            f"{max(available, 0)} bytes of vertex data follow (truncated file or wrong vertex count)",
+        )
     buffer = np.empty(need, np.uint8)
     f.seek(offset)
     try:
@@ -140,7 +172,7 @@ def _binary_vertices(path: PathLike, f: BinaryIO, header: PlyHeader) -> np.ndarr
 def _bytes_before_vertex(path: PathLike, f: BinaryIO, header: PlyHeader, byte_order: str) -> int:
     """Size of the binary data of the elements that precede 'vertex'."""
     size = 0
-    for element in header.elements[:header.elements.index(header.vertex)]:
+    for element in header.elements[: header.elements.index(header.vertex)]:
         if any(p.list_count_type for p in element.properties):
             f.seek(header.header_size + size)
             size += _walk_list_element(path, _read(path, f, -1), element, byte_order)
@@ -177,14 +209,16 @@ def _walk_list_element(path: PathLike, data: bytes, element: PlyElement, byte_or
 
 def _ascii_vertices(path: PathLike, body: bytes, header: PlyHeader) -> np.ndarray:
     """The vertex rows of an ASCII body as a structured array (native byte order)."""
-    first = sum(e.count for e in header.elements[:header.elements.index(header.vertex)])
+    first = sum(e.count for e in header.elements[: header.elements.index(header.vertex)])
     count = header.vertex_count
     newlines = np.flatnonzero(np.frombuffer(body, np.uint8) == ord("\n"))
     n_lines = len(newlines) + (1 if body and not body.endswith(b"\n") else 0)
     if first + count > n_lines:
         raise PlyFormatError(
-            path, f"truncated: the ASCII data has {n_lines} lines but the header needs {first + count} "
-                  f"({first} for earlier elements, {count} vertex rows)")
+            path,
+            f"truncated: the ASCII data has {n_lines} lines but the header needs {first + count} "
+            f"({first} for earlier elements, {count} vertex rows)",
+        )
     dtype = _record_dtype(header.properties, "=")
     if count == 0:
         return np.empty(0, dtype)
@@ -193,8 +227,10 @@ def _ascii_vertices(path: PathLike, body: bytes, header: PlyHeader) -> np.ndarra
     end = int(newlines[last]) if last < len(newlines) else len(body)
     values = _parse_ascii_table(path, body[begin:end], len(dtype.names))
     if values.shape[0] != count:
-        raise PlyFormatError(path, f"the ASCII vertex data has {values.shape[0]} rows, the header says {count} "
-                                   "(blank lines in the data?)")
+        raise PlyFormatError(
+            path,
+            f"the ASCII vertex data has {values.shape[0]} rows, the header says {count} (blank lines in the data?)",
+        )
     records = np.empty(count, dtype)
     with np.errstate(over="ignore"):  # values beyond float32 become Inf, reported by the caller
         for column, (name, ply_type) in zip(values.T, header.properties):
@@ -213,8 +249,9 @@ def _parse_ascii_table(path: PathLike, text: bytes, n_columns: int) -> np.ndarra
         reason = str(exc).split(";")[0]
         raise PlyFormatError(path, f"malformed ASCII vertex data ({reason})") from None
     if values.shape[1] != n_columns and values.size:
-        raise PlyFormatError(path, f"the ASCII vertex rows have {values.shape[1]} values, "
-                                   f"the header declares {n_columns} properties")
+        raise PlyFormatError(
+            path, f"the ASCII vertex rows have {values.shape[1]} values, the header declares {n_columns} properties"
+        )
     return values
 
 
@@ -226,8 +263,10 @@ def _ascii_column(path: PathLike, name: str, ply_type: str, column: np.ndarray) 
     info = np.iinfo(code)
     bad = int(np.count_nonzero(~((column == np.floor(column)) & (column >= info.min) & (column <= info.max))))
     if bad:
-        raise PlyFormatError(path, f"ASCII property {name!r} ({ply_type}) has {bad} values that are not "
-                                   f"integers in [{info.min}, {info.max}]")
+        raise PlyFormatError(
+            path,
+            f"ASCII property {name!r} ({ply_type}) has {bad} values that are not integers in [{info.min}, {info.max}]",
+        )
     return column
 
 
@@ -239,8 +278,9 @@ def _field_block(records: np.ndarray, names: list[str]) -> np.ndarray | None:
     dtype, start = fields[names[0]][:2]
     if any(fields[name][:2] != (dtype, start + i * dtype.itemsize) for i, name in enumerate(names)):
         return None
-    return np.ndarray((len(records), len(names)), dtype, records.view(np.uint8), start,
-                      (records.itemsize, dtype.itemsize))
+    return np.ndarray(
+        (len(records), len(names)), dtype, records.view(np.uint8), start, (records.itemsize, dtype.itemsize)
+    )
 
 
 def _read_group(records: np.ndarray, key: str, names: list[str]) -> np.ndarray:
@@ -257,14 +297,21 @@ def _read_group(records: np.ndarray, key: str, names: list[str]) -> np.ndarray:
 
 
 def _arrays_from_records(
-    path: PathLike, header: PlyHeader, records: np.ndarray, k: int, drop_invalid: bool,
+    path: PathLike,
+    header: PlyHeader,
+    records: np.ndarray,
+    k: int,
+    drop_invalid: bool,
 ) -> SplatArrays:
     groups = core_groups(k)
     with np.errstate(over="ignore"):  # double values beyond float32 become Inf, reported below
         arrays = {key: _read_group(records, key, names) for key, names in groups.items()}
     core = {name for names in groups.values() for name in names}
-    extras = {name: records[name].astype(records.dtype[name].newbyteorder("="))
-              for name, _ in header.properties if name not in core}
+    extras = {
+        name: records[name].astype(records.dtype[name].newbyteorder("="))
+        for name, _ in header.properties
+        if name not in core
+    }
     finite = np.ones(len(records), bool)
     for values in arrays.values():
         if not np.isfinite(values).all():  # per-row check only when needed: it is 10x slower
@@ -273,10 +320,13 @@ def _arrays_from_records(
     if n_bad:
         if not drop_invalid:
             raise PlyFormatError(
-                path, f"{n_bad} of {len(records)} Gaussians have non-finite values (NaN or Inf) in their "
-                      "parameters; use --drop-invalid (drop_invalid=True) to load the file without them")
-        warnings.warn(f"{os.fspath(path)}: dropped {n_bad} of {len(records)} Gaussians with non-finite values",
-                      stacklevel=4)
+                path,
+                f"{n_bad} of {len(records)} Gaussians have non-finite values (NaN or Inf) in their "
+                "parameters; use --drop-invalid (drop_invalid=True) to load the file without them",
+            )
+        warnings.warn(
+            f"{os.fspath(path)}: dropped {n_bad} of {len(records)} Gaussians with non-finite values", stacklevel=4
+        )
         arrays = {key: values[finite] for key, values in arrays.items()}
         extras = {name: values[finite] for name, values in extras.items()}
     return SplatArrays(**arrays, extras=extras, ply_layout=header.properties)

@@ -1,10 +1,14 @@
 """The PLY header: format, elements and properties, parsed and checked before any data is read."""
+
 from __future__ import annotations
+
 import os
 import re
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, BinaryIO
+
 from ..errors import PlyFormatError
+
 if TYPE_CHECKING:
     import numpy as np
 
@@ -23,16 +27,36 @@ FORMATS = {"binary_little_endian": "<", "binary_big_endian": ">", "ascii": "="}
 
 
 SCALAR_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+    "char": "i1",
+    "int8": "i1",
+    "uchar": "u1",
+    "uint8": "u1",
+    "short": "i2",
+    "int16": "i2",
+    "ushort": "u2",
+    "uint16": "u2",
+    "int": "i4",
+    "int32": "i4",
+    "uint": "u4",
+    "uint32": "u4",
+    "float": "f4",
+    "float32": "f4",
+    "double": "f8",
+    "float64": "f8",
 }
 """PLY scalar type names (classic and sized aliases) -> numpy type codes."""
 
 
-TYPE_FOR_CODE = {"i1": "char", "u1": "uchar", "i2": "short", "u2": "ushort",
-                 "i4": "int", "u4": "uint", "f4": "float", "f8": "double"}
+TYPE_FOR_CODE = {
+    "i1": "char",
+    "u1": "uchar",
+    "i2": "short",
+    "u2": "ushort",
+    "i4": "int",
+    "u4": "uint",
+    "f4": "float",
+    "f8": "double",
+}
 """numpy type code -> the classic PLY type name written for it (the types PLY can store)."""
 
 
@@ -132,7 +156,8 @@ def _parse_header(path: PathLike, data: bytes) -> PlyHeader:
             element_name, _, props = elements[-1]
             if any(prop.name == p.name for p in props):
                 raise PlyFormatError(
-                    path, f"header line {number}: duplicate property {prop.name!r} in element {element_name!r}")
+                    path, f"header line {number}: duplicate property {prop.name!r} in element {element_name!r}"
+                )
             props.append(prop)
         else:
             raise PlyFormatError(path, f"header line {number}: unknown header keyword {key!r}")
@@ -172,8 +197,9 @@ def _header_lines(path: PathLike, data: bytes) -> tuple[list[tuple[int, str]], i
             return lines, len(data) if end < 0 else end + 1
         if end < 0:
             if len(data) >= HEADER_LIMIT:
-                raise PlyFormatError(path, f"no 'end_header' line in the first {HEADER_LIMIT} bytes "
-                                           "(header too long or corrupt)")
+                raise PlyFormatError(
+                    path, f"no 'end_header' line in the first {HEADER_LIMIT} bytes (header too long or corrupt)"
+                )
             raise PlyFormatError(path, "the header has no 'end_header' line (truncated file?)")
         lines.append((number, line))
         pos = end + 1
@@ -182,15 +208,17 @@ def _header_lines(path: PathLike, data: bytes) -> tuple[list[tuple[int, str]], i
 def _parse_format(path: PathLike, number: int, tokens: list[str]) -> str:
     if len(tokens) != 3 or tokens[1] not in FORMATS:
         raise PlyFormatError(
-            path, f"header line {number}: bad format line {' '.join(tokens)!r}; expected "
-                  f"'format <{'|'.join(FORMATS)}> 1.0'")
+            path,
+            f"header line {number}: bad format line {' '.join(tokens)!r}; expected 'format <{'|'.join(FORMATS)}> 1.0'",
+        )
     return tokens[1]
 
 
 def _parse_element(path: PathLike, number: int, tokens: list[str]) -> tuple[str, int]:
     if len(tokens) != 3 or not re.fullmatch(r"-?[0-9]+", tokens[2]):
-        raise PlyFormatError(path, f"header line {number}: bad element line {' '.join(tokens)!r}; "
-                                   "expected 'element <name> <count>'")
+        raise PlyFormatError(
+            path, f"header line {number}: bad element line {' '.join(tokens)!r}; expected 'element <name> <count>'"
+        )
     count = int(tokens[2])
     if count < 0:
         raise PlyFormatError(path, f"header line {number}: element {tokens[1]!r} has a negative count {count}")
@@ -206,19 +234,22 @@ def _parse_property(path: PathLike, number: int, tokens: list[str]) -> PlyProper
             _check_type(path, number, t)
         if SCALAR_TYPES[count_type][0] == "f":
             raise PlyFormatError(
-                path, f"header line {number}: list {name!r} has a non-integer count type {count_type!r}")
+                path, f"header line {number}: list {name!r} has a non-integer count type {count_type!r}"
+            )
         return PlyProperty(name, item_type, count_type)
     if len(tokens) != 3:
-        raise PlyFormatError(path, f"header line {number}: bad property line {' '.join(tokens)!r}; "
-                                   "expected 'property <type> <name>'")
+        raise PlyFormatError(
+            path, f"header line {number}: bad property line {' '.join(tokens)!r}; expected 'property <type> <name>'"
+        )
     _check_type(path, number, tokens[1])
     return PlyProperty(tokens[2], tokens[1])
 
 
 def _check_type(path: PathLike, number: int, ply_type: str) -> None:
     if ply_type not in SCALAR_TYPES:
-        raise PlyFormatError(path, f"header line {number}: unknown property type {ply_type!r} "
-                                   f"(known: {', '.join(SCALAR_TYPES)})")
+        raise PlyFormatError(
+            path, f"header line {number}: unknown property type {ply_type!r} (known: {', '.join(SCALAR_TYPES)})"
+        )
 
 
 def _type_label(prop: PlyProperty) -> str:

@@ -1,16 +1,20 @@
 """Write Gaussian scenes as INRIA PLY: byte for byte in the source layout when it still fits, else the
 canonical INRIA order (float32 core). numpy only, so Blender can export before torch is installed."""
+
 from __future__ import annotations
+
 from pathlib import Path
 from typing import TYPE_CHECKING
+
 import numpy as np
+
 from ..atomic import atomic_write
+
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
 from .inria import NORMAL_NAMES, REST_PREFIX, core_groups, core_property_names, tensor_view
-from .ply_header import FORMATS, PathLike, SCALAR_TYPES, TYPE_FOR_CODE, _PROPERTY_NAME, type_code
 from .ply import SplatArrays, _field_block, _record_dtype
-
+from .ply_header import _PROPERTY_NAME, FORMATS, SCALAR_TYPES, TYPE_FOR_CODE, PathLike, type_code
 
 _ASCII_FORMAT = {"f4": "%.9g", "f8": "%.17g"}  # enough digits to read back exactly; integers use %d
 
@@ -22,8 +26,13 @@ def write_ply(path: PathLike, scene: GaussianScene | SplatArrays, *, fmt: str = 
     layout = write_layout(scene)
     records = _records(scene, layout, FORMATS[fmt])
     header = "".join(
-        ["ply\n", f"format {fmt} 1.0\n", f"element vertex {len(scene)}\n",
-         *(f"property {t} {name}\n" for name, t in layout), "end_header\n"]
+        [
+            "ply\n",
+            f"format {fmt} 1.0\n",
+            f"element vertex {len(scene)}\n",
+            *(f"property {t} {name}\n" for name, t in layout),
+            "end_header\n",
+        ]
     ).encode("ascii")
     body = _ascii_body(records, layout) if fmt == "ascii" else records.view(np.uint8)
     atomic_write(Path(path), (header, body))
@@ -40,8 +49,10 @@ def write_layout(scene: GaussianScene | SplatArrays) -> tuple[tuple[str, str], .
     normals = [name for name in NORMAL_NAMES if name in scene.extras]
     order = [*core[:3], *normals, *core[3:]]
     order += [name for name in scene.extras if name not in order]
-    return tuple((name, TYPE_FOR_CODE[type_code(scene.extras[name].dtype)] if name in scene.extras else "float")
-                 for name in order)
+    return tuple(
+        (name, TYPE_FOR_CODE[type_code(scene.extras[name].dtype)] if name in scene.extras else "float")
+        for name in order
+    )
 
 
 def _check_extras(scene: GaussianScene | SplatArrays, core: set[str]) -> None:
@@ -53,8 +64,10 @@ def _check_extras(scene: GaussianScene | SplatArrays, core: set[str]) -> None:
         if not isinstance(values, np.ndarray) or values.shape != (len(scene),):
             raise ValueError(f"extra property {name!r} must be a numpy array of shape ({len(scene)},)")
         if type_code(values.dtype) not in TYPE_FOR_CODE:
-            raise ValueError(f"extra property {name!r} has dtype {values.dtype}, which PLY cannot store "
-                             f"(use one of {', '.join(TYPE_FOR_CODE)})")
+            raise ValueError(
+                f"extra property {name!r} has dtype {values.dtype}, which PLY cannot store "
+                f"(use one of {', '.join(TYPE_FOR_CODE)})"
+            )
 
 
 def _layout_fits(layout: tuple[tuple[str, str], ...], scene: GaussianScene | SplatArrays, core: set[str]) -> bool:

@@ -10,6 +10,7 @@ transparent ones, and (later in training) ones too large on screen or in the wor
 Gaussians are never densified, pruned or reset. Every change goes through
 :meth:`GaussianAdam.restructure`, so parameters, Adam moments, masks and statistics stay aligned.
 """
+
 from __future__ import annotations
 
 import logging
@@ -18,9 +19,9 @@ from dataclasses import dataclass
 
 import torch
 
-from .optim import GaussianAdam
 from ..render.projection import Projection
 from ..scene.gaussians import quats_to_rotmats
+from .optim import GaussianAdam
 
 GRAD_SOURCES = ("position", "color")
 log = logging.getLogger(__name__)
@@ -82,8 +83,9 @@ class DensityStats:
         if self.source == "position":
             if projection.means2d.grad is None:
                 return
-            ndc = projection.means2d.grad.detach() * torch.tensor([width / 2.0, height / 2.0],
-                                                                   dtype=projection.means2d.dtype, device=ids.device)
+            ndc = projection.means2d.grad.detach() * torch.tensor(
+                [width / 2.0, height / 2.0], dtype=projection.means2d.dtype, device=ids.device
+            )
             self.grad_sum.index_add_(0, ids, ndc.norm(dim=-1).double())
             self.count.index_add_(0, ids, torch.ones_like(ids))
         else:
@@ -111,8 +113,13 @@ class DensityStats:
             t.zero_()
 
 
-def apply_structure(opt: GaussianAdam, stats: DensityStats, keep: torch.Tensor, parents: torch.Tensor,
-                    values: dict[str, torch.Tensor] | None = None) -> None:
+def apply_structure(
+    opt: GaussianAdam,
+    stats: DensityStats,
+    keep: torch.Tensor,
+    parents: torch.Tensor,
+    values: dict[str, torch.Tensor] | None = None,
+) -> None:
     """Keep the rows ``keep`` (bool) and append children of ``parents`` (with ``values`` overriding
     their tensors), in the optimiser and the statistics alike."""
     kept = keep.nonzero().squeeze(1)
@@ -122,7 +129,12 @@ def apply_structure(opt: GaussianAdam, stats: DensityStats, keep: torch.Tensor, 
 
 
 def densify_and_prune(
-    opt: GaussianAdam, stats: DensityStats, config: DensifyConfig, extent: float, *, prune_large: bool,
+    opt: GaussianAdam,
+    stats: DensityStats,
+    config: DensifyConfig,
+    extent: float,
+    *,
+    prune_large: bool,
     generator: torch.Generator | None = None,
 ) -> DensifyReport:
     """One density-control step: clone, split and prune by the accumulated statistics, then reset them."""
@@ -137,13 +149,17 @@ def densify_and_prune(
     clone_ids = (grow & small).nonzero().squeeze(1)
     split_parents = (grow & ~small).nonzero().squeeze(1)
     count = config.split_count
-    means, log_scales = _split_children(scene.means, scene.quats, scene.log_scales,
-                                        split_parents.repeat_interleave(count), count, generator)
+    means, log_scales = _split_children(
+        scene.means, scene.quats, scene.log_scales, split_parents.repeat_interleave(count), count, generator
+    )
     finite = (torch.isfinite(means).all(dim=-1) & torch.isfinite(log_scales).all(dim=-1)).view(-1, count).all(dim=-1)
     unsplit = int((~finite).sum())
     if unsplit:
-        log.warning("densify: %d Gaussians were not split because their children's positions or scales would not "
-                    "be finite (absurd scales); they are kept as they are", unsplit)
+        log.warning(
+            "densify: %d Gaussians were not split because their children's positions or scales would not "
+            "be finite (absurd scales); they are kept as they are",
+            unsplit,
+        )
         children = finite.repeat_interleave(count)
         split_parents, means, log_scales = split_parents[finite], means[children], log_scales[children]
     values = {
@@ -154,12 +170,17 @@ def densify_and_prune(
     keep[split_parents] = False
     apply_structure(opt, stats, keep, torch.cat([clone_ids, split_parents.repeat_interleave(count)]), values)
     stats.reset()
-    return DensifyReport(cloned=len(clone_ids), split=len(split_parents), pruned=int(prune.sum()),
-                         total=len(opt.scene), unsplit=unsplit)
+    return DensifyReport(
+        cloned=len(clone_ids), split=len(split_parents), pruned=int(prune.sum()), total=len(opt.scene), unsplit=unsplit
+    )
 
 
 def _split_children(
-    means: torch.Tensor, quats: torch.Tensor, log_scales: torch.Tensor, ids: torch.Tensor, count: int,
+    means: torch.Tensor,
+    quats: torch.Tensor,
+    log_scales: torch.Tensor,
+    ids: torch.Tensor,
+    count: int,
     generator: torch.Generator | None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Children of the parents ``ids`` (each listed ``count`` times): positions sampled from the

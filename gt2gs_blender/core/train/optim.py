@@ -7,12 +7,13 @@ keeping survivors' moments and giving new Gaussians zero moments; (3) skip a ste
 gradient or update is not finite instead of spreading NaNs into the scene, log it, and halve the
 learning rates when such steps repeat (:class:`StepGuard`, usable with any optimiser).
 """
+
 from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, replace
-from typing import Iterable
 
 import torch
 
@@ -21,7 +22,7 @@ from ..scene.gaussians import GaussianScene
 PARAM_NAMES = ("means", "quats", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
 BACKOFF_AFTER = 3
 """Consecutive skipped steps after which the learning rates are halved."""
-MIN_LR_SCALE = 2.0 ** -10
+MIN_LR_SCALE = 2.0**-10
 """The learning-rate multiplier never backs off below this (1/1024)."""
 
 log = logging.getLogger(__name__)
@@ -92,8 +93,11 @@ class StepGuard:
         log.warning("optimisation step skipped: %s (%d skipped so far)", reason, self.skipped)
         if self.consecutive % self.backoff_after == 0 and self.lr_scale > MIN_LR_SCALE:
             self.lr_scale = max(self.lr_scale * 0.5, MIN_LR_SCALE)
-            log.warning("%d steps in a row were not finite: learning rates scaled to %g of their schedule",
-                        self.consecutive, self.lr_scale)
+            log.warning(
+                "%d steps in a row were not finite: learning rates scaled to %g of their schedule",
+                self.consecutive,
+                self.lr_scale,
+            )
         return False
 
 
@@ -107,16 +111,25 @@ class GaussianAdam:
     """
 
     def __init__(
-        self, scene: GaussianScene, lrs: dict[str, float], *, trainable: Iterable[str] = PARAM_NAMES,
-        frozen: torch.Tensor | None = None, attachments: dict[str, torch.Tensor] | None = None,
-        betas: tuple[float, float] = (0.9, 0.999), eps: float = 1e-15,
+        self,
+        scene: GaussianScene,
+        lrs: dict[str, float],
+        *,
+        trainable: Iterable[str] = PARAM_NAMES,
+        frozen: torch.Tensor | None = None,
+        attachments: dict[str, torch.Tensor] | None = None,
+        betas: tuple[float, float] = (0.9, 0.999),
+        eps: float = 1e-15,
     ) -> None:
         n = len(scene)
         self.lrs = dict(lrs)
         self.betas, self.eps = betas, eps
         self.trainable = _check_names(trainable)
-        self.frozen = torch.zeros(n, dtype=torch.bool, device=scene.device) if frozen is None \
+        self.frozen = (
+            torch.zeros(n, dtype=torch.bool, device=scene.device)
+            if frozen is None
             else frozen.to(device=scene.device, dtype=torch.bool).clone()
+        )
         if self.frozen.shape != (n,):
             raise ValueError(f"frozen mask has shape {tuple(self.frozen.shape)}, expected ({n},)")
         self.attachments = {k: v.detach().clone() for k, v in (attachments or {}).items()}
@@ -214,9 +227,7 @@ class GaussianAdam:
 
     def _leaves(self, scene: GaussianScene) -> GaussianScene:
         """The scene with detached leaf tensors requiring grad exactly where trainable."""
-        return replace(scene, **{
-            k: v.detach().requires_grad_(k in self.trainable) for k, v in scene.tensors().items()
-        })
+        return replace(scene, **{k: v.detach().requires_grad_(k in self.trainable) for k, v in scene.tensors().items()})
 
 
 def _check_names(names: Iterable[str]) -> frozenset[str]:

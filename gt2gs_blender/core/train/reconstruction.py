@@ -9,8 +9,9 @@ import torch.nn.functional as F
 from .ssim import WINDOW, ssim, ssim_map
 
 
-def reconstruction_loss(rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2,
-                        tolerance: float = 0.0) -> torch.Tensor:
+def reconstruction_loss(
+    rendered: torch.Tensor, target: torch.Tensor, lambda_dssim: float = 0.2, tolerance: float = 0.0
+) -> torch.Tensor:
     """3DGS's (1 - lambda) L1 + lambda (1 - SSIM) of (H, W, 3) or (B, H, W, 3) images.
 
     ``tolerance`` > 0 treats smaller residuals as none: the L1 term counts only the excess, and SSIM

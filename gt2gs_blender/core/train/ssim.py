@@ -5,6 +5,7 @@ K2 = 0.03; the score is the mean of the SSIM map over pixels and channels. The s
 evaluation metric (checked against pytorch_msssim and skimage values) and, as 1 - SSIM, the D-SSIM
 term of the 3DGS reconstruction loss. Images are channels-last, as the rasterizer renders them.
 """
+
 from __future__ import annotations
 
 import torch
@@ -15,8 +16,13 @@ SIGMA = 1.5
 K1, K2 = 0.01, 0.03
 
 
-def gaussian_window(size: int = WINDOW, sigma: float = SIGMA, *, dtype: torch.dtype = torch.float32,
-                    device: torch.device | str | None = None) -> torch.Tensor:
+def gaussian_window(
+    size: int = WINDOW,
+    sigma: float = SIGMA,
+    *,
+    dtype: torch.dtype = torch.float32,
+    device: torch.device | str | None = None,
+) -> torch.Tensor:
     """The normalised 1D Gaussian (size,) whose outer product is the 2D SSIM window."""
     x = torch.arange(size, dtype=torch.float64, device=device) - (size - 1) / 2.0
     g = torch.exp(-(x * x) / (2.0 * sigma * sigma))

@@ -5,6 +5,7 @@ normalised depth (the cell's depth group over K - 1: near cells learn the textur
 normalised high-frequency energy of the content image (an 8x8-block DCT, one block per feature cell:
 detailed regions keep their detail) and Phi the distortion map of :func:`gt2.distortion`.
 """
+
 from __future__ import annotations
 
 import math
@@ -57,8 +58,9 @@ def high_frequency_energy(image: torch.Tensor, feature_hw: tuple[int, int]) -> t
     gray = (image[..., 0] * 0.299 + image[..., 1] * 0.587 + image[..., 2] * 0.114)[None, None]
     size = (h * BLOCK, w * BLOCK)
     shrink = size[0] <= image.shape[0] and size[1] <= image.shape[1]
-    gray = F.interpolate(gray.float(), size=size, mode="area" if shrink else "bilinear",
-                         **({} if shrink else {"align_corners": False}))[0, 0]
+    gray = F.interpolate(
+        gray.float(), size=size, mode="area" if shrink else "bilinear", **({} if shrink else {"align_corners": False})
+    )[0, 0]
     return block_dct(gray)[..., HIGH_BAND, HIGH_BAND].abs().sum(dim=(-1, -2)).float()
 
 
@@ -80,9 +82,10 @@ def depth_level(groups: torch.Tensor | None, n_groups: int, like: torch.Tensor) 
     return (groups.clamp_min(0).to(like.dtype) / (n_groups - 1)).to(like.device)
 
 
-def afcm_weight(depth: torch.Tensor, frequency: torch.Tensor, distortion: torch.Tensor,
-                weights: AFCMWeights = AFCMWeights()) -> torch.Tensor:
+def afcm_weight(
+    depth: torch.Tensor, frequency: torch.Tensor, distortion: torch.Tensor, weights: AFCMWeights = AFCMWeights()
+) -> torch.Tensor:
     """Paper Eq. 8: W = lambda_d (1 - I_d) + lambda_f (1 - I_f) + lambda_phi (1 - Phi), all (h,w) in [0, 1]."""
-    return weights.depth * (1.0 - depth) + weights.frequency * (1.0 - frequency) + \
-        weights.distortion * (1.0 - distortion)
-
+    return (
+        weights.depth * (1.0 - depth) + weights.frequency * (1.0 - frequency) + weights.distortion * (1.0 - distortion)
+    )

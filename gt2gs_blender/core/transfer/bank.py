@@ -1,16 +1,19 @@
 """The texture bank a run matches against: its angle count, depth ratio and on-disk cache folder."""
+
 from __future__ import annotations
+
 import os
 from pathlib import Path
+
 import numpy as np
 import torch
-from .config import MAX_DEPTH_RATIO, TransferConfig
+
 from ..features.extractor import FeatureExtractor
+from ..progress import Tracker
+from .config import MAX_DEPTH_RATIO, TransferConfig
 from .skips import angles_for, texture_anisotropy
 from .texture_bank import TextureBank, build_texture_bank, feature_map_bank, group_depth_ratio
-from ..progress import Tracker
 from .views import ViewSet
-
 
 BANK_MAX_CROP = 64
 """Texture crops are capped at 64 px: the kept centre cells are then identical (tested), 3-4x faster."""
@@ -50,8 +53,14 @@ def bank_depth_ratio(views: ViewSet, config: TransferConfig) -> float:
     return round(min(measured, MAX_DEPTH_RATIO), 2)
 
 
-def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig, device: torch.device,
-               tracker: Tracker, depth_ratio: float) -> TextureBank:
+def build_bank(
+    texture: np.ndarray,
+    extractor: FeatureExtractor,
+    config: TransferConfig,
+    device: torch.device,
+    tracker: Tracker,
+    depth_ratio: float,
+) -> TextureBank:
     """The texture's feature bank at scale 1 (renders are halved before VGG, the texture is not), its
     depth groups' scales spanning ``depth_ratio`` (paper §3.2: the group's texture shrinks as Z_1/Z_k)."""
 
@@ -61,16 +70,29 @@ def build_bank(texture: np.ndarray, extractor: FeatureExtractor, config: Transfe
 
     n_angles = bank_angle_count(texture, config)
     return build_texture_bank(
-        texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
-        n_scales=config.n_scales, n_angles=n_angles, depth_ratio_range=(1.0, depth_ratio),
+        texture,
+        lambda x: extractor(x, scale=1.0),
+        extractor_id=f"{extractor.fingerprint}:s1",
+        n_scales=config.n_scales,
+        n_angles=n_angles,
+        depth_ratio_range=(1.0, depth_ratio),
         texture_height=config.texture_height,
-        max_crop=BANK_MAX_CROP, cache_dir=cache_dir(config), device=device, progress=report,
+        max_crop=BANK_MAX_CROP,
+        cache_dir=cache_dir(config),
+        device=device,
+        progress=report,
         angle_offset=config.angle % (360.0 / n_angles),
     ).to(device)
 
 
-def nnfm_bank(texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig,
-              device: torch.device) -> TextureBank:
+def nnfm_bank(
+    texture: np.ndarray, extractor: FeatureExtractor, config: TransferConfig, device: torch.device
+) -> TextureBank:
     """The plain NNFM loss's bank (``gt2`` off): the texture's own feature map at scale 1."""
-    return feature_map_bank(texture, lambda x: extractor(x, scale=1.0), extractor_id=f"{extractor.fingerprint}:s1",
-                            texture_height=config.texture_height, device=device).to(device)
+    return feature_map_bank(
+        texture,
+        lambda x: extractor(x, scale=1.0),
+        extractor_id=f"{extractor.fingerprint}:s1",
+        texture_height=config.texture_height,
+        device=device,
+    ).to(device)

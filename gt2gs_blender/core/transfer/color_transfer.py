@@ -15,6 +15,7 @@ Degenerate inputs never produce NaN: content eigenvalues are floored at the vari
 quantisation noise (and at 1e-4 of the largest), so a grey or constant content image maps onto the
 texture's mean along its missing directions instead of blowing up; a constant texture gives A = 0.
 """
+
 from __future__ import annotations
 
 import logging
@@ -123,8 +124,11 @@ def _weighted_moments(pairs: Iterable[tuple[ImageLike, ImageLike | None]]) -> tu
             shift = x[0].clone()
         if shift is not None:
             x = x - shift
-        w = torch.ones(len(x), dtype=torch.float64) if weight is None else (
-            torch.as_tensor(weight).detach().reshape(-1).to("cpu", torch.float64))
+        w = (
+            torch.ones(len(x), dtype=torch.float64)
+            if weight is None
+            else (torch.as_tensor(weight).detach().reshape(-1).to("cpu", torch.float64))
+        )
         if len(w) != len(x):
             raise ValueError(f"weight map with {len(w)} pixels for an image with {len(x)}")
         total += w.sum()

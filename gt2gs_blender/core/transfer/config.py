@@ -64,165 +64,366 @@ class TransferConfig:
     """Every setting of a transfer run. Loss weights follow the paper's names (lambda_*)."""
 
     # -- views
-    resolution: int = setting(256, "Resolution", "Longest side of the working views", "views", unit="px", min=16,
-                              soft_max=1024)
-    n_views: int = setting(16, "View Count", "Automatic views around the object (when no cameras are given)",
-                           "views", min=1, soft_max=64, flag="--views")
-    feature_scale: float = setting(0.5, "Feature Scale", "Renders are resized by this before the feature network",
-                                   "views", min=0.05, max=4.0)
+    resolution: int = setting(
+        256, "Resolution", "Longest side of the working views", "views", unit="px", min=16, soft_max=1024
+    )
+    n_views: int = setting(
+        16,
+        "View Count",
+        "Automatic views around the object (when no cameras are given)",
+        "views",
+        min=1,
+        soft_max=64,
+        flag="--views",
+    )
+    feature_scale: float = setting(
+        0.5, "Feature Scale", "Renders are resized by this before the feature network", "views", min=0.05, max=4.0
+    )
     background: tuple[float, float, float] = setting(
-        (1.0, 1.0, 1.0), "Background", "Colour behind the object in the working views", "views", min=0.0, max=1.0)
-    drop_views: bool = setting(False, "Drop Redundant Views",
-                               "Leave out views that show almost nothing the others do not", "speed")
-    min_new_coverage: float = setting(0.02, "New Coverage",
-                                      "A view is redundant when it adds less than this share of unseen pixels",
-                                      "speed", min=0.0, max=1.0)
+        (1.0, 1.0, 1.0), "Background", "Colour behind the object in the working views", "views", min=0.0, max=1.0
+    )
+    drop_views: bool = setting(
+        False, "Drop Redundant Views", "Leave out views that show almost nothing the others do not", "speed"
+    )
+    min_new_coverage: float = setting(
+        0.02,
+        "New Coverage",
+        "A view is redundant when it adds less than this share of unseen pixels",
+        "speed",
+        min=0.0,
+        max=1.0,
+    )
     # -- texture
     texture_height: int = setting(
-        256, "Texture Size", "Height of the texture on the nearest surfaces, in pixels of the view at half the "
+        256,
+        "Texture Size",
+        "Height of the texture on the nearest surfaces, in pixels of the view at half the "
         "working resolution (as the feature network sees it); smaller repeats the pattern more often",
-        "texture", unit="px", min=8, soft_max=1024)
-    n_angles: int = setting(36, "Texture Rotations", "Rotations of the texture over 360° the bank holds", "texture",
-                            min=1, max=360)
-    n_scales: int = setting(4, "Depth Groups", "Texture sizes, one per depth group of the view (paper: K)",
-                            "texture", min=1, max=8)
-    depth_groups: bool = setting(True, "Depth Grouping",
-                                 "Show the texture larger on near surfaces than on far ones", "texture")
+        "texture",
+        unit="px",
+        min=8,
+        soft_max=1024,
+    )
+    n_angles: int = setting(
+        36, "Texture Rotations", "Rotations of the texture over 360° the bank holds", "texture", min=1, max=360
+    )
+    n_scales: int = setting(
+        4, "Depth Groups", "Texture sizes, one per depth group of the view (paper: K)", "texture", min=1, max=8
+    )
+    depth_groups: bool = setting(
+        True, "Depth Grouping", "Show the texture larger on near surfaces than on far ones", "texture"
+    )
     depth_ratio: float = setting(
-        0.0, "Depth Ratio", "How many times smaller the texture shows on the farthest surfaces than on the nearest: "
+        0.0,
+        "Depth Ratio",
+        "How many times smaller the texture shows on the farthest surfaces than on the nearest: "
         f"0 = as perspective shows it, measured from the views (at most {MAX_DEPTH_RATIO:g}); 1-16 fixed",
-        "texture", min=0.0, max=16.0)
-    cell_coverage: float = setting(0.5, "Cell Coverage",
-                                   "How much of a feature cell the object must cover for the texture to count there",
-                                   "texture", min=0.0, max=1.0)
-    adaptive_angles: bool = setting(False, "Adaptive Rotations",
-                                    "Fewer rotations for a texture with no strong direction", "speed")
-    dedup_threshold: float = setting(0.0, "Deduplicate Bank",
-                                     "Drop near-identical bank entries above this similarity (0 = keep all)", "speed",
-                                     min=0.0, max=1.0)
-    match_channels: int = setting(64, "Matching Channels",
-                                  "Match texture features on this many principal components (0 = all channels)",
-                                  "speed", min=0, soft_max=256,
-                                  switch=("--full-matching", 0, "match on all channels, not 64 principal components"))
+        "texture",
+        min=0.0,
+        max=16.0,
+    )
+    cell_coverage: float = setting(
+        0.5,
+        "Cell Coverage",
+        "How much of a feature cell the object must cover for the texture to count there",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
+    adaptive_angles: bool = setting(
+        False, "Adaptive Rotations", "Fewer rotations for a texture with no strong direction", "speed"
+    )
+    dedup_threshold: float = setting(
+        0.0,
+        "Deduplicate Bank",
+        "Drop near-identical bank entries above this similarity (0 = keep all)",
+        "speed",
+        min=0.0,
+        max=1.0,
+    )
+    match_channels: int = setting(
+        64,
+        "Matching Channels",
+        "Match texture features on this many principal components (0 = all channels)",
+        "speed",
+        min=0,
+        soft_max=256,
+        switch=("--full-matching", 0, "match on all channels, not 64 principal components"),
+    )
     bank_cache: bool = setting(True, "Cache Texture Banks", "Keep texture banks on disk for the next run", "speed")
     # -- stylise
-    stylise_steps: int = setting(200, "Steps", "Optimisation steps of the stylisation", "stylise", unit="steps",
-                                 min=0, soft_max=2000, flag="--steps")
+    stylise_steps: int = setting(
+        200,
+        "Steps",
+        "Optimisation steps of the stylisation",
+        "stylise",
+        unit="steps",
+        min=0,
+        soft_max=2000,
+        flag="--steps",
+    )
     lr: float = setting(0.02, "Learning Rate", "Step size on the splats' colours", "stylise", min=1e-6, soft_max=0.2)
     stylised_sh_degree: int = setting(
-        0, "View-Dependent Colour", "Spherical-harmonic degree of restyled colours: 0 = the same from every side, "
-        "1-3 also train view-dependent bands", "stylise", min=0, max=3)
-    lambda_style: float = setting(1.0, "Texture Strength", "Weight of the texture loss", "stylise", min=0.0,
-                                  soft_max=10.0)
+        0,
+        "View-Dependent Colour",
+        "Spherical-harmonic degree of restyled colours: 0 = the same from every side, "
+        "1-3 also train view-dependent bands",
+        "stylise",
+        min=0,
+        max=3,
+    )
+    lambda_style: float = setting(
+        1.0, "Texture Strength", "Weight of the texture loss", "stylise", min=0.0, soft_max=10.0
+    )
     lambda_content: float = setting(
-        0.005, "Content Strength", "How strongly the original appearance is kept (paper: 0.005 forward-facing, "
-        "0.0005 all-around scenes)", "stylise", min=0.0, soft_max=0.05)
-    lambda_tv: float = setting(0.02, "Smoothness", "Weight of the image smoothness (total variation) term",
-                               "stylise", min=0.0, soft_max=1.0)
-    color_transfer: bool = setting(True, "Colour Transfer",
-                                   "Match the scene's colours to the texture's before and after", "stylise")
+        0.005,
+        "Content Strength",
+        "How strongly the original appearance is kept (paper: 0.005 forward-facing, 0.0005 all-around scenes)",
+        "stylise",
+        min=0.0,
+        soft_max=0.05,
+    )
+    lambda_tv: float = setting(
+        0.02, "Smoothness", "Weight of the image smoothness (total variation) term", "stylise", min=0.0, soft_max=1.0
+    )
+    color_transfer: bool = setting(
+        True, "Colour Transfer", "Match the scene's colours to the texture's before and after", "stylise"
+    )
     object_backdrop: bool = setting(
-        False, "Object Backdrop", "Stylise the object over its own mean colour, not the background, so the texture "
-        "does not trace its outline; the texture comes out weaker", "stylise")
+        False,
+        "Object Backdrop",
+        "Stylise the object over its own mean colour, not the background, so the texture "
+        "does not trace its outline; the texture comes out weaker",
+        "stylise",
+    )
     stylise_geometry: bool = setting(
-        False, "Texture Moves Splats", "Let the texture loss move, scale and turn the splats too, as the paper's code "
-        "does: bolder texture, looser shape", "stylise")
+        False,
+        "Texture Moves Splats",
+        "Let the texture loss move, scale and turn the splats too, as the paper's code "
+        "does: bolder texture, looser shape",
+        "stylise",
+    )
     densify: bool = setting(True, "Densify", "Add splats where the texture needs detail", "stylise")
-    densify_every: int = setting(25, "Densify Every", "Stylisation steps between densification events", "stylise",
-                                 unit="steps", min=1, soft_max=200)
-    densify_grad_threshold: float = setting(2e-4, "Densify Threshold",
-                                            "Colour gradient that makes a splat split or clone", "stylise", min=0.0,
-                                            soft_max=0.01)
-    densify_max_growth: float = setting(1.5, "Densify Growth Limit",
-                                        "No densification once the splat count has grown by this factor", "stylise",
-                                        min=1.0, soft_max=4.0)
+    densify_every: int = setting(
+        25,
+        "Densify Every",
+        "Stylisation steps between densification events",
+        "stylise",
+        unit="steps",
+        min=1,
+        soft_max=200,
+    )
+    densify_grad_threshold: float = setting(
+        2e-4,
+        "Densify Threshold",
+        "Colour gradient that makes a splat split or clone",
+        "stylise",
+        min=0.0,
+        soft_max=0.01,
+    )
+    densify_max_growth: float = setting(
+        1.5,
+        "Densify Growth Limit",
+        "No densification once the splat count has grown by this factor",
+        "stylise",
+        min=1.0,
+        soft_max=4.0,
+    )
     seed: int = setting(0, "Seed", "Random seed of the run", "stylise", min=0)
     # -- GT²
-    gt2: bool = setting(True, "GT² Loss",
-                        "Carry the texture's orientation from view to view (off: plain NNFM matching)", "gt2")
-    angle: float = setting(0.0, "Orientation", "Angle of the texture in the first view, counter-clockwise", "gt2",
-                           unit="°", min=-360.0, max=360.0)
-    lambda_prior: float = setting(0.002, "Orientation Prior",
-                                  "Cost per degree of turning the texture away from the previous views' angle",
-                                  "gt2", min=0.0, soft_max=100.0)
+    gt2: bool = setting(
+        True, "GT² Loss", "Carry the texture's orientation from view to view (off: plain NNFM matching)", "gt2"
+    )
+    angle: float = setting(
+        0.0,
+        "Orientation",
+        "Angle of the texture in the first view, counter-clockwise",
+        "gt2",
+        unit="°",
+        min=-360.0,
+        max=360.0,
+    )
+    lambda_prior: float = setting(
+        0.002,
+        "Orientation Prior",
+        "Cost per degree of turning the texture away from the previous views' angle",
+        "gt2",
+        min=0.0,
+        soft_max=100.0,
+    )
     # -- AFCM
     afcm: bool = setting(True, "Adaptive Control", "Weight the texture loss by depth, detail and distortion", "afcm")
-    lambda_depth: float = setting(0.8, "Depth Weight", "How much less the texture counts on far surfaces", "afcm",
-                                  min=0.0, max=1.0)
-    lambda_frequency: float = setting(0.8, "Detail Weight", "How much less the texture counts on detailed areas",
-                                      "afcm", min=0.0, max=1.0)
-    lambda_distortion: float = setting(0.25, "Distortion Weight",
-                                       "How much less the texture counts where it is seen at a grazing angle", "afcm",
-                                       min=0.0, max=1.0)
+    lambda_depth: float = setting(
+        0.8, "Depth Weight", "How much less the texture counts on far surfaces", "afcm", min=0.0, max=1.0
+    )
+    lambda_frequency: float = setting(
+        0.8, "Detail Weight", "How much less the texture counts on detailed areas", "afcm", min=0.0, max=1.0
+    )
+    lambda_distortion: float = setting(
+        0.25,
+        "Distortion Weight",
+        "How much less the texture counts where it is seen at a grazing angle",
+        "afcm",
+        min=0.0,
+        max=1.0,
+    )
     # -- GPB
-    gpb: bool = setting(True, "Geometry Preservation",
-                        "Alternate stylisation with phases that keep the geometry (off: faster)", "gpb")
-    rounds: int = setting(4, "Rounds", "Stylise/preserve alternations (the steps are split evenly)", "gpb", min=1,
-                          soft_max=20)
-    correct_steps: int = setting(100, "Preservation Steps", "Geometry preservation steps in all", "gpb",
-                                 unit="steps", min=0, soft_max=4000)
-    lambda_scale: float = setting(0.1, "Scale Regulariser", "Weight of the penalty on needle-like splats", "gpb",
-                                  min=0.0, soft_max=1.0)
-    scale_ratio_limit: float = setting(10.0, "Needle Limit",
-                                       "Largest/second splat scale ratio tolerated before it is penalised", "gpb",
-                                       min=1.0, soft_max=100.0)
+    gpb: bool = setting(
+        True, "Geometry Preservation", "Alternate stylisation with phases that keep the geometry (off: faster)", "gpb"
+    )
+    rounds: int = setting(
+        4, "Rounds", "Stylise/preserve alternations (the steps are split evenly)", "gpb", min=1, soft_max=20
+    )
+    correct_steps: int = setting(
+        100, "Preservation Steps", "Geometry preservation steps in all", "gpb", unit="steps", min=0, soft_max=4000
+    )
+    lambda_scale: float = setting(
+        0.1, "Scale Regulariser", "Weight of the penalty on needle-like splats", "gpb", min=0.0, soft_max=1.0
+    )
+    scale_ratio_limit: float = setting(
+        10.0,
+        "Needle Limit",
+        "Largest/second splat scale ratio tolerated before it is penalised",
+        "gpb",
+        min=1.0,
+        soft_max=100.0,
+    )
     scale_ratio_from_start: bool = setting(
-        True, "Keep Original Needles", "Tolerate each splat's own starting ratio if larger: only needles the "
-        "stylisation makes are penalised", "gpb")
+        True,
+        "Keep Original Needles",
+        "Tolerate each splat's own starting ratio if larger: only needles the stylisation makes are penalised",
+        "gpb",
+    )
     # -- speed
-    skip_hidden: bool = setting(True, "Skip Hidden Splats",
-                                "Leave splats no view sees out of the optimisation (same result, faster)", "speed")
-    hidden_threshold: float = setting(0.1, "Hidden Below",
-                                      "A splat is hidden when all views together show less than this many pixels of "
-                                      "it", "speed", unit="px", min=0.0, soft_max=10.0)
-    skip_sh: bool = setting(True, "Skip Unused SH Bands",
-                            "Render the original only up to its highest spherical-harmonic band in use", "speed")
-    plateau_window: int = setting(16, "Plateau Window",
-                                  "Stop a phase when the mean loss of this many steps stops falling (0 = run all)",
-                                  "speed", unit="steps", min=0, soft_max=100,
-                                  switch=("--no-plateau-stop", 0, "run every step of every phase"))
-    plateau_tol: float = setting(0.01, "Plateau Tolerance",
-                                 "A phase has stopped falling when its loss drops by less than this fraction",
-                                 "speed", min=0.0, max=1.0)
-    reuse_content: bool = setting(True, "Reuse Content Renders",
-                                  "Reuse the last run's renders of the original (same scene and views)", "speed")
-    evaluate: bool = setting(True, "Measure Result", "Measure consistency, content and texture match at the end",
-                             "speed")
+    skip_hidden: bool = setting(
+        True, "Skip Hidden Splats", "Leave splats no view sees out of the optimisation (same result, faster)", "speed"
+    )
+    hidden_threshold: float = setting(
+        0.1,
+        "Hidden Below",
+        "A splat is hidden when all views together show less than this many pixels of it",
+        "speed",
+        unit="px",
+        min=0.0,
+        soft_max=10.0,
+    )
+    skip_sh: bool = setting(
+        True,
+        "Skip Unused SH Bands",
+        "Render the original only up to its highest spherical-harmonic band in use",
+        "speed",
+    )
+    plateau_window: int = setting(
+        16,
+        "Plateau Window",
+        "Stop a phase when the mean loss of this many steps stops falling (0 = run all)",
+        "speed",
+        unit="steps",
+        min=0,
+        soft_max=100,
+        switch=("--no-plateau-stop", 0, "run every step of every phase"),
+    )
+    plateau_tol: float = setting(
+        0.01,
+        "Plateau Tolerance",
+        "A phase has stopped falling when its loss drops by less than this fraction",
+        "speed",
+        min=0.0,
+        max=1.0,
+    )
+    reuse_content: bool = setting(
+        True, "Reuse Content Renders", "Reuse the last run's renders of the original (same scene and views)", "speed"
+    )
+    evaluate: bool = setting(
+        True, "Measure Result", "Measure consistency, content and texture match at the end", "speed"
+    )
     # -- machine
-    mixed_precision: bool = setting(True, "Mixed Precision",
-                                    "Run the feature network in float16 on a CUDA GPU (the CPU always uses float32)",
-                                    "machine", blender=IN_PREFERENCES)
-    features: str = setting("auto", "Feature Network", "Which feature network to use (auto: the best one found)",
-                            "machine", choices=("auto", "vgg16_relu3", "vgg19_norm_relu3"), blender=IN_PREFERENCES)
-    weights_path: str | None = setting(None, "Weights", "VGG weights file or folder (default: $GT2GS_WEIGHTS_DIR, "
-                                       "then torch's cache)", "machine", flag="--weights", blender=IN_PREFERENCES)
-    device: str = setting("auto", "Device", "Where the run computes: auto = CUDA when available", "machine",
-                          choices=("auto", "cpu", "cuda"), blender=IN_PREFERENCES)
-    threads: int = setting(0, "CPU Threads", "CPU threads for the run (0 = one per physical core); fewer keeps "
-                           "Blender responsive", "machine", min=0, soft_max=64, blender=IN_PREFERENCES)
-    backend: str = setting("auto", "Rasterizer", "Rasterizer backend (auto = the fastest available)", "machine",
-                           choices=("auto", "torch", "cpu", "gsplat"), blender=IN_PREFERENCES)
-    cache_dir: str | None = setting(None, "Bank Cache Folder", "Where texture banks are cached (default: "
-                                    "$GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)", "machine",
-                                    blender=IN_PREFERENCES)
-    preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1,
-                                 internal=True)
+    mixed_precision: bool = setting(
+        True,
+        "Mixed Precision",
+        "Run the feature network in float16 on a CUDA GPU (the CPU always uses float32)",
+        "machine",
+        blender=IN_PREFERENCES,
+    )
+    features: str = setting(
+        "auto",
+        "Feature Network",
+        "Which feature network to use (auto: the best one found)",
+        "machine",
+        choices=("auto", "vgg16_relu3", "vgg19_norm_relu3"),
+        blender=IN_PREFERENCES,
+    )
+    weights_path: str | None = setting(
+        None,
+        "Weights",
+        "VGG weights file or folder (default: $GT2GS_WEIGHTS_DIR, then torch's cache)",
+        "machine",
+        flag="--weights",
+        blender=IN_PREFERENCES,
+    )
+    device: str = setting(
+        "auto",
+        "Device",
+        "Where the run computes: auto = CUDA when available",
+        "machine",
+        choices=("auto", "cpu", "cuda"),
+        blender=IN_PREFERENCES,
+    )
+    threads: int = setting(
+        0,
+        "CPU Threads",
+        "CPU threads for the run (0 = one per physical core); fewer keeps Blender responsive",
+        "machine",
+        min=0,
+        soft_max=64,
+        blender=IN_PREFERENCES,
+    )
+    backend: str = setting(
+        "auto",
+        "Rasterizer",
+        "Rasterizer backend (auto = the fastest available)",
+        "machine",
+        choices=("auto", "torch", "cpu", "gsplat"),
+        blender=IN_PREFERENCES,
+    )
+    cache_dir: str | None = setting(
+        None,
+        "Bank Cache Folder",
+        "Where texture banks are cached (default: $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)",
+        "machine",
+        blender=IN_PREFERENCES,
+    )
+    preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1, internal=True)
 
     def __post_init__(self) -> None:
-        positive = ("resolution", "n_views", "n_scales", "n_angles", "texture_height", "preview_every", "rounds",
-                    "densify_every")
+        positive = (
+            "resolution",
+            "n_views",
+            "n_scales",
+            "n_angles",
+            "texture_height",
+            "preview_every",
+            "rounds",
+            "densify_every",
+        )
         for name in positive:
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
         if self.stylise_steps < 0 or self.correct_steps < 0 or self.lr <= 0:
-            raise ValueError(f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
-                             f"{self.correct_steps}, {self.lr}")
+            raise ValueError(
+                f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
+                f"{self.correct_steps}, {self.lr}"
+            )
         if not 0.0 <= self.dedup_threshold <= 1.0 or self.match_channels < 0 or self.plateau_window < 0:
-            raise ValueError(f"need 0 <= dedup_threshold <= 1, match_channels >= 0 and plateau_window >= 0, got "
-                             f"{self.dedup_threshold}, {self.match_channels}, {self.plateau_window}")
+            raise ValueError(
+                f"need 0 <= dedup_threshold <= 1, match_channels >= 0 and plateau_window >= 0, got "
+                f"{self.dedup_threshold}, {self.match_channels}, {self.plateau_window}"
+            )
         if not 0.0 < self.feature_scale <= 4.0 or not 0.0 <= self.min_new_coverage <= 1.0:
-            raise ValueError(f"need 0 < feature_scale <= 4 and 0 <= min_new_coverage <= 1, got {self.feature_scale}, "
-                             f"{self.min_new_coverage}")
+            raise ValueError(
+                f"need 0 < feature_scale <= 4 and 0 <= min_new_coverage <= 1, got {self.feature_scale}, "
+                f"{self.min_new_coverage}"
+            )
         if not 0 <= self.stylised_sh_degree <= 3:
             raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
         if not 0.0 <= self.cell_coverage <= 1.0:
@@ -271,55 +472,3 @@ def _python_type(annotation: Any) -> type:
         if text.startswith(name):
             return kind
     raise TypeError(f"unsupported setting type {annotation!r}")
-
-
-PAPER_SCHEDULE: dict[str, Any] = dict(
-    resolution=1008,         # LLFF at 1/4 of 4032 px, as the paper trains
-    stylise_steps=20 * 80,   # 10 rounds x (80 stylise + 200 correct + 80 stylise + 200 correct)
-    correct_steps=20 * 200,
-    rounds=20,
-    n_scales=4, n_angles=360, texture_height=256,
-    lambda_style=2.0, lambda_tv=0.02, lambda_prior=100.0,
-    lambda_depth=0.8, lambda_frequency=0.8, lambda_distortion=0.25,
-    lambda_scale=0.1, scale_ratio_limit=1.0, scale_ratio_from_start=False,
-    stylise_geometry=True,   # the authors' stylise phases step every parameter, geometry included
-    plateau_window=0,        # the paper's step counts, run in full
-    match_channels=0,        # and its matching on every channel
-)
-"""The paper's schedule and weights (paper §4 and appendix, the authors' code for lambda_p and the
-scale regulariser); its 400 + 400 colour-transfer fitting steps are exact SH transforms here."""
-
-PRESETS: dict[str, TransferConfig] = {
-    "preview": TransferConfig(resolution=128, n_views=8, stylise_steps=40, correct_steps=20, rounds=2, n_scales=2,
-                              n_angles=8, texture_height=128, evaluate=False, preview_every=5),
-    "fast": TransferConfig(stylise_steps=300, correct_steps=150, n_angles=72),
-    "balanced": TransferConfig(resolution=384, n_views=24, stylise_steps=600, correct_steps=300, rounds=6,
-                               n_angles=72),
-    "paper-llff": TransferConfig(**PAPER_SCHEDULE, lambda_content=0.005),
-    "paper-360": TransferConfig(**PAPER_SCHEDULE, lambda_content=0.0005),
-}
-"""``preview`` gives a first look in seconds, ``fast`` a usable result in minutes on a CPU (on the
-donut, 16 views at 256 px: 300 + 150 steps and 72 angles bring texture match within 5 % of
-``balanced`` where the defaults' 200 + 100 steps and 36 angles stayed 10 % off, bench/tradeoff.py),
-``balanced`` more views, resolution and texture orientations; ``paper-llff`` and ``paper-360`` are
-the paper's settings exactly (hours on a CPU: meant for a GPU)."""
-DEFAULT_PRESET = "fast"
-PRESET_HELP = {
-    "preview": "A first look in seconds",
-    "fast": "A usable result in minutes on a CPU",
-    "balanced": "More views, resolution and texture orientations",
-    "paper-llff": "The paper's settings for forward-facing scenes (hours on a CPU: meant for a GPU)",
-    "paper-360": "The paper's settings for all-around scenes (hours on a CPU: meant for a GPU)",
-}
-
-
-def preset(name: str, **overrides: Any) -> TransferConfig:
-    """The named preset with optional overrides."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
-    return PRESETS[name].with_overrides(**overrides)
-
-
-def paper_value(name: str) -> Any:
-    """The paper's value of a setting (its ``paper-llff`` preset), for help texts."""
-    return getattr(PRESETS["paper-llff"], name)

@@ -15,6 +15,7 @@ R = [[cos phi, -sin phi], [sin phi, cos phi]] its rotation, a texture at theta' 
 theta' + phi in view v, so beta = phi = atan2(R10, R00). The authors' code adds beta in radians to
 degrees and never warps the prior map; neither is reproduced.
 """
+
 from __future__ import annotations
 
 import math
@@ -26,9 +27,9 @@ import torch
 import torch.nn.functional as F
 
 from ..cameras.camera import Camera
+from ..cameras.warp import expected_depth, pixel_centres, warp_image
 from .losses import COSINE_EPS
 from .texture_bank import TextureBank, pixel_cells
-from ..cameras.warp import expected_depth, pixel_centres, warp_image
 
 MIN_CELL_PIXELS = 3
 """A cell needs this many pixels seen in both views to fit its 2x2 map (and at least half its pixels)."""
@@ -56,8 +57,9 @@ def rotation_angle(maps: torch.Tensor) -> torch.Tensor:
     return torch.rad2deg(torch.atan2(r[..., 1, 0], r[..., 0, 0]))
 
 
-def fit_linear_maps(src: torch.Tensor, dst: torch.Tensor, cell: torch.Tensor, weight: torch.Tensor,
-                    n_cells: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def fit_linear_maps(
+    src: torch.Tensor, dst: torch.Tensor, cell: torch.Tensor, weight: torch.Tensor, n_cells: int
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per cell, the least-squares 2x2 map M with dst - mean(dst) ~ M (src - mean(src)).
 
     ``src``/``dst`` (P,2) point pairs, ``cell`` (P,) their cell index, ``weight`` (P,) 1 for pairs
@@ -66,9 +68,12 @@ def fit_linear_maps(src: torch.Tensor, dst: torch.Tensor, cell: torch.Tensor, we
     """
     src, dst, w = src.double(), dst.double(), weight.double()
     count = torch.zeros(n_cells, dtype=torch.float64, device=src.device).index_add_(0, cell, w)
+
     def cell_sum(values: torch.Tensor) -> torch.Tensor:
         return torch.zeros(n_cells, *values.shape[1:], dtype=torch.float64, device=src.device).index_add_(
-            0, cell, values * w.reshape(-1, *([1] * (values.dim() - 1))))
+            0, cell, values * w.reshape(-1, *([1] * (values.dim() - 1)))
+        )
+
     n = count.clamp_min(1.0)
     src_mean = cell_sum(src) / n[:, None]
     dst_mean = cell_sum(dst) / n[:, None]
@@ -96,13 +101,21 @@ class PriorLink:
         """(h,w) prior angle per cell from the previous view's matched angles (its (h',w') map, NaN
         where nothing was matched); NaN where the cell has no prior."""
         carried = previous_angles.reshape(-1)[self.source] + self.beta
-        return torch.where(self.valid & torch.isfinite(carried), wrap_degrees(carried),
-                           torch.full_like(carried, math.nan))
+        return torch.where(
+            self.valid & torch.isfinite(carried), wrap_degrees(carried), torch.full_like(carried, math.nan)
+        )
 
 
-def prior_link(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor, previous: Camera,
-               previous_depth: torch.Tensor, previous_alpha: torch.Tensor, feature_hw: tuple[int, int],
-               previous_feature_hw: tuple[int, int] | None = None) -> PriorLink:
+def prior_link(
+    camera: Camera,
+    depth: torch.Tensor,
+    alpha: torch.Tensor,
+    previous: Camera,
+    previous_depth: torch.Tensor,
+    previous_alpha: torch.Tensor,
+    feature_hw: tuple[int, int],
+    previous_feature_hw: tuple[int, int] | None = None,
+) -> PriorLink:
     """The :class:`PriorLink` of ``camera`` to ``previous`` from the original scene's raw rendered
     depths (sum T alpha z) and alphas of both views (H,W)."""
     h, w = feature_hw
@@ -119,8 +132,9 @@ def prior_link(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor, previou
     valid = (count >= MIN_CELL_PIXELS) & (count >= 0.5 * pixels)
     col = (landing[:, 0] * pw / previous.width).floor().long().clamp(0, pw - 1)
     row = (landing[:, 1] * ph / previous.height).floor().long().clamp(0, ph - 1)
-    beta = torch.where(valid, rotation_angle(torch.where(valid[:, None, None], maps, torch.eye(2).to(maps))),
-                       torch.zeros_like(count))
+    beta = torch.where(
+        valid, rotation_angle(torch.where(valid[:, None, None], maps, torch.eye(2).to(maps))), torch.zeros_like(count)
+    )
     return PriorLink(valid.reshape(h, w), (row * pw + col).reshape(h, w), beta.float().reshape(h, w))
 
 
@@ -133,8 +147,9 @@ def view_order(cameras: Sequence[Camera]) -> list[int]:
     order, left = [0], set(range(1, len(cameras)))
     while left:
         last = order[-1]
-        cost = {j: np.linalg.norm(centres[j] - centres[last]) / scale + (1.0 - forwards[j] @ forwards[last])
-                for j in left}
+        cost = {
+            j: np.linalg.norm(centres[j] - centres[last]) / scale + (1.0 - forwards[j] @ forwards[last]) for j in left
+        }
         nearest = min(cost, key=lambda j: (cost[j], j))
         order.append(nearest)
         left.remove(nearest)
@@ -158,15 +173,22 @@ def angle_layout(theta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     order = torch.sort(inverse, stable=True).indices
     starts = torch.cumsum(counts, 0) - counts
     slot = torch.arange(len(theta), device=theta.device) - starts[inverse[order]]
-    table = torch.full((len(angles), int(counts.max()) if len(counts) else 0), -1, dtype=torch.long,
-                       device=theta.device)
+    table = torch.full(
+        (len(angles), int(counts.max()) if len(counts) else 0), -1, dtype=torch.long, device=theta.device
+    )
     table[inverse[order], slot] = order
     return angles, table
 
 
 @torch.no_grad()
-def match_with_prior(feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor, lambda_prior: float,
-                     groups: torch.Tensor | None = None, cells: torch.Tensor | None = None) -> Match:
+def match_with_prior(
+    feats: torch.Tensor,
+    bank: TextureBank,
+    prior: torch.Tensor,
+    lambda_prior: float,
+    groups: torch.Tensor | None = None,
+    cells: torch.Tensor | None = None,
+) -> Match:
     """Per cell of ``feats`` (C,h,w): argmin over the bank (restricted to the cell's depth group when
     ``groups`` (h,w) is given and >= 0) of (1 - cos) + ``lambda_prior`` * angle_distance(prior, theta)
     per degree; NaN ``prior`` cells match on cosine alone. ``cells`` (h,w) bool: match only these
@@ -185,22 +207,29 @@ def match_with_prior(feats: torch.Tensor, bank: TextureBank, prior: torch.Tensor
         rows = F.normalize(bank.features.to(queries), dim=1, eps=COSINE_EPS)
     flat_prior = prior.reshape(-1).to(queries)
     flat_groups = None if groups is None else groups.reshape(-1).to(queries.device)
-    wanted = torch.ones(h * w, dtype=torch.bool, device=queries.device) if cells is None \
+    wanted = (
+        torch.ones(h * w, dtype=torch.bool, device=queries.device)
+        if cells is None
         else cells.reshape(-1).to(queries.device)
+    )
     best = torch.zeros(h * w, dtype=torch.long, device=queries.device)
     free = torch.zeros_like(best)
-    for g in ([None] if flat_groups is None else torch.unique(flat_groups[wanted]).tolist()):
+    for g in [None] if flat_groups is None else torch.unique(flat_groups[wanted]).tolist():
         members = wanted if g is None else wanted & (flat_groups == g)
         cells_g = members.nonzero().squeeze(1)
-        bank_rows = torch.arange(len(rows), device=queries.device) if g is None or g < 0 \
+        bank_rows = (
+            torch.arange(len(rows), device=queries.device)
+            if g is None or g < 0
             else (bank.k.to(queries.device) == g).nonzero().squeeze(1)
+        )
         group_rows = rows[bank_rows]
         angles, table = angle_layout(bank.theta.to(queries.device)[bank_rows])
         blocks = table.numel() == len(bank_rows) and bool(
-            torch.equal(table.reshape(-1), torch.arange(len(bank_rows), device=table.device)))
+            torch.equal(table.reshape(-1), torch.arange(len(bank_rows), device=table.device))
+        )
         step = max(1, MATCH_BLOCK // max(table.numel(), 1))
         for start in range(0, len(cells_g), step):
-            part = cells_g[start:start + step]
+            part = cells_g[start : start + step]
             cost = 1.0 - queries[part] @ group_rows.T
             if blocks:  # rows already ordered by angle in equal runs (every bank built here): a view
                 per_angle = cost.view(len(part), *table.shape)

@@ -1,9 +1,11 @@
-"""The stylisation loss pieces: cosine distance and nearest texture features (NNFM, paper Eq. 3), content, image TV, scale regulariser.
+"""The stylisation loss pieces: cosine distance and nearest texture features (NNFM, paper Eq. 3), content,
+image TV, scale regulariser.
 
-Conventions that differ from the authors' code on purpose (docs/architecture.md, "The method and the authors' code"): cosine similarity is taken
-over the CHANNEL axis of feature maps (theirs normalises over height), and TV differences pixels
-along HEIGHT and WIDTH (theirs differences channels and height).
+Conventions that differ from the authors' code on purpose (docs/architecture.md, "The method and the
+authors' code"): cosine similarity is taken over the CHANNEL axis of feature maps (theirs normalises over
+height), and TV differences pixels along HEIGHT and WIDTH (theirs differences channels and height).
 """
+
 from __future__ import annotations
 
 import torch
@@ -22,7 +24,9 @@ def cosine_distance(a: torch.Tensor, b: torch.Tensor, dim: int = -1) -> torch.Te
 
 
 @torch.no_grad()
-def nearest_features(queries: torch.Tensor, bank: torch.Tensor, *, chunk_bytes: int = DEFAULT_CHUNK_BYTES) -> torch.Tensor:
+def nearest_features(
+    queries: torch.Tensor, bank: torch.Tensor, *, chunk_bytes: int = DEFAULT_CHUNK_BYTES
+) -> torch.Tensor:
     """Index (N,) of the bank row (M,C) most cosine-similar to each query (N,C); first index on ties."""
     q = F.normalize(queries.detach(), dim=1, eps=COSINE_EPS)
     m = F.normalize(bank.detach().to(q), dim=1, eps=COSINE_EPS)
@@ -36,15 +40,15 @@ def _blockwise_argmax(q: torch.Tensor, m: torch.Tensor, chunk_bytes: int) -> tor
     query_step = max(1, chunk_bytes // (item * bank_step))
     best = torch.empty(len(q), dtype=torch.long, device=q.device)
     for q0 in range(0, len(q), query_step):
-        block = q[q0:q0 + query_step]
+        block = q[q0 : q0 + query_step]
         best_sim = torch.full((len(block),), -torch.inf, dtype=q.dtype, device=q.device)
         best_idx = torch.zeros(len(block), dtype=torch.long, device=q.device)
         for m0 in range(0, len(m), bank_step):
-            sim, idx = (block @ m[m0:m0 + bank_step].T).max(dim=1)
+            sim, idx = (block @ m[m0 : m0 + bank_step].T).max(dim=1)
             better = sim > best_sim
             best_sim = torch.where(better, sim, best_sim)
             best_idx = torch.where(better, idx + m0, best_idx)
-        best[q0:q0 + len(block)] = best_idx
+        best[q0 : q0 + len(block)] = best_idx
     return best
 
 

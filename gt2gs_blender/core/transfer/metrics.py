@@ -10,6 +10,7 @@
 - render FPS and peak memory.
 Images are channels-last (V,H,W,3) in [0, 1], as the rasterizer renders them.
 """
+
 from __future__ import annotations
 
 import sys
@@ -19,14 +20,14 @@ from collections.abc import Sequence
 import torch
 
 from ..cameras.camera import Camera
+from ..cameras.warp import MIN_ALPHA, expected_depth, warp_image
 from ..features.extractor import FeatureExtractor
-from .losses import cosine_distance, nearest_features
 from ..features.lpips import LPIPS
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..train.ssim import ssim
+from .losses import cosine_distance, nearest_features
 from .texture_bank import covered_cells
-from ..cameras.warp import MIN_ALPHA, expected_depth, warp_image
 
 SHORT_RANGE = 1
 LONG_RANGE = 7
@@ -53,17 +54,18 @@ def consistency(
 ) -> dict[str, float | None]:
     """Warped-render error over the pairs (i, i + ``pairs_offset``): ``{rmse, lpips}``, None without pairs.
 
-    ``depths`` are the rasterizer's sum T*alpha*z (divided by alpha here). RMSE is over valid pixels
-    and channels of each pair; a pair without a valid pixel is left out. LPIPS sees both images with invalid pixels set to 0 in both, so
-    masked areas add zero distance and dilute the mean by the invalid fraction (as in the peers'
-    masked LPIPS); ``lpips`` None skips it.
+    ``depths`` are the rasterizer's sum T*alpha*z (divided by alpha here). RMSE is over valid pixels and
+    channels of each pair; a pair without a valid pixel is left out. LPIPS sees both images with invalid
+    pixels set to 0 in both, so masked areas add zero distance and dilute the mean by the invalid fraction
+    (as in the peers' masked LPIPS); ``lpips`` None skips it.
     """
     z = expected_depth(depths, alphas, min_alpha)
     rmses, lpipses = [], []
     for i in range(len(cameras) - pairs_offset):
         j = i + pairs_offset
-        warp = warp_image(images[i], z[i], cameras[i], cameras[j], z[j], src_alpha=alphas[i], dst_alpha=alphas[j],
-                          min_alpha=min_alpha)
+        warp = warp_image(
+            images[i], z[i], cameras[i], cameras[j], z[j], src_alpha=alphas[i], dst_alpha=alphas[j], min_alpha=min_alpha
+        )
         if not warp.valid.any():
             continue
         target = torch.where(warp.valid[..., None], images[j], torch.zeros_like(images[j]))

@@ -7,6 +7,7 @@ one is given), then shaded by the render's
 luminance so the shape stays readable. No optimisation runs: it takes a fraction of a second and
 lets an artist choose the angle before starting a transfer.
 """
+
 from __future__ import annotations
 
 import math
@@ -17,10 +18,10 @@ import numpy as np
 import torch
 
 from ..cameras.camera import Camera
-from .config import MAX_DEPTH_RATIO
 from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
+from .config import MAX_DEPTH_RATIO
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
 

@@ -6,30 +6,34 @@ colours so their rendered features match the texture's, with content and TV term
 (colour transfer again, metrics). Progress goes to a callback with the stage, step, ETA and preview
 frames; a cancel callable is polled between steps and raises ``Cancelled``.
 """
+
 from __future__ import annotations
+
 import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, replace
+
 import numpy as np
 import torch
-from . import color_transfer
+
 from ..cameras.camera import Camera
-from .config import TransferConfig
+from ..device import cpu_threads, resolve_device
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor, load_feature_extractor, mixed_precision_dtype
-from .gt2 import view_order
+from ..progress import ProgressCallback, Tracker
 from ..scene.gaussians import GaussianScene
+from . import color_transfer
+from .bank import bank_depth_ratio, build_bank, nnfm_bank
+from .config import TransferConfig
+from .content import content_and_hidden, content_degree
+from .gt2 import view_order
+from .region import assemble, region_mask, structure_changed, stylise_start
 from .skips import Plateau, redundant_views
 from .stylise import Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture import load_texture
 from .texture_bank import TextureBank, compact_bank
-from ..progress import ProgressCallback, Tracker
-from ..device import cpu_threads, resolve_device
 from .views import ViewSet, fit_cameras, render_views, view_targets
-from .bank import bank_depth_ratio, build_bank, nnfm_bank
-from .content import content_and_hidden, content_degree
-from .region import assemble, structure_changed, stylise_start, region_mask
 
 STAGE_WEIGHTS = {"prepare": 0.1, "bank": 0.15, "stylise": 0.65, "finish": 0.1}
 """Rough share of a run's time per stage, for the overall progress fraction and the ETA."""
@@ -53,8 +57,9 @@ def _load_texture(texture: np.ndarray | str | os.PathLike) -> np.ndarray:
     return load_texture(texture)
 
 
-def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarray,
-                         rows: torch.Tensor | None = None, backend: str = "auto") -> GaussianScene:
+def apply_color_transfer(
+    scene: GaussianScene, views: ViewSet, texture: np.ndarray, rows: torch.Tensor | None = None, backend: str = "auto"
+) -> GaussianScene:
     """ARF colour transfer fitted on the covered pixels of the views, applied exactly in SH space;
     with ``rows`` (a bool mask) fitted on the pixels those Gaussians cover and applied to them only."""
     weights = views.alphas
@@ -64,13 +69,23 @@ def apply_color_transfer(scene: GaussianScene, views: ViewSet, texture: np.ndarr
     moved = color_transfer.apply_to_scene(scene, matrix, offset)
     if rows is None:
         return moved
-    return replace(scene, sh_dc=torch.where(rows[:, None], moved.sh_dc, scene.sh_dc),
-                   sh_rest=torch.where(rows[:, None, None], moved.sh_rest, scene.sh_rest))
+    return replace(
+        scene,
+        sh_dc=torch.where(rows[:, None], moved.sh_dc, scene.sh_dc),
+        sh_rest=torch.where(rows[:, None, None], moved.sh_rest, scene.sh_rest),
+    )
 
 
-def stylise(scene: GaussianScene, views: ViewSet, targets: list[ViewTargets], bank: TextureBank,
-            extractor: FeatureExtractor, config: TransferConfig, tracker: Tracker,
-            frozen: torch.Tensor | None) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats]:
+def stylise(
+    scene: GaussianScene,
+    views: ViewSet,
+    targets: list[ViewTargets],
+    bank: TextureBank,
+    extractor: FeatureExtractor,
+    config: TransferConfig,
+    tracker: Tracker,
+    frozen: torch.Tensor | None,
+) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats]:
     """Run the stylise/correct schedule (module ``stylise``), reporting progress and previews; the
     scene, its frozen rows (after densification) and the counts."""
     order = order_and_link(targets, views.depths, views.alphas)
@@ -91,8 +106,9 @@ def stylise(scene: GaussianScene, views: ViewSet, targets: list[ViewTargets], ba
             step += 1
             tracker.tell(step, total, message, preview)
             if plateau.update(loss) and done + 1 < steps:
-                styliser.report.plateau_skipped[phase] = styliser.report.plateau_skipped.get(phase, 0) \
-                    + steps - done - 1
+                styliser.report.plateau_skipped[phase] = (
+                    styliser.report.plateau_skipped.get(phase, 0) + steps - done - 1
+                )
                 step += steps - done - 1
                 break
     return styliser.scene.detach(), None if frozen is None else styliser.opt.frozen.clone(), styliser.report
@@ -120,11 +136,19 @@ def transfer(
     """
     config = config or TransferConfig()
     with cpu_threads(config.threads):
-        return _transfer(scene, texture, views, config, region, Tracker(progress, cancel, STAGE_WEIGHTS, "texture transfer"))
+        return _transfer(
+            scene, texture, views, config, region, Tracker(progress, cancel, STAGE_WEIGHTS, "texture transfer")
+        )
 
 
-def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, views: Sequence[Camera] | int | None,
-              config: TransferConfig, region: torch.Tensor | np.ndarray | None, tracker: Tracker) -> TransferResult:
+def _transfer(
+    scene: GaussianScene,
+    texture: np.ndarray | str | os.PathLike,
+    views: Sequence[Camera] | int | None,
+    config: TransferConfig,
+    region: torch.Tensor | np.ndarray | None,
+    tracker: Tracker,
+) -> TransferResult:
     """The body of :func:`transfer`."""
     torch.manual_seed(config.seed)
     device = resolve_device(config.device)
@@ -133,8 +157,9 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
     image = _load_texture(texture)
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
-    cameras = fit_cameras(original if selected is None else original.subset(selected), views, config.resolution,
-                          config.n_views)
+    cameras = fit_cameras(
+        original if selected is None else original.subset(selected), views, config.resolution, config.n_views
+    )
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     content, hidden = content_and_hidden(original, cameras, background, config)
     start = work = stylise_start(original, selected, config.stylised_sh_degree)
@@ -145,10 +170,18 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
     region = selected if selected is None or hidden is None else selected[~hidden]
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
-    extractor = load_feature_extractor(config.features, config.weights_path, device, scale=config.feature_scale,
-                                       autocast=mixed_precision_dtype(device, config.mixed_precision))
-    dropped = redundant_views(cameras, content.depths, content.alphas, view_order(cameras), config.min_new_coverage) \
-        if config.drop_views and len(cameras) > 2 else []
+    extractor = load_feature_extractor(
+        config.features,
+        config.weights_path,
+        device,
+        scale=config.feature_scale,
+        autocast=mixed_precision_dtype(device, config.mixed_precision),
+    )
+    dropped = (
+        redundant_views(cameras, content.depths, content.alphas, view_order(cameras), config.min_new_coverage)
+        if config.drop_views and len(cameras) > 2
+        else []
+    )
     used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content
     targets = view_targets(used, work, extractor, config, config.backend)
     tracker.end()
@@ -156,8 +189,9 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
     tracker.begin("bank")
     # the labelled bank serves GT² matching and the texture-match metric of every variant
     depth_ratio = bank_depth_ratio(used, config)
-    labelled = build_bank(image, extractor, config, device, tracker, depth_ratio) \
-        if config.gt2 or config.evaluate else None
+    labelled = (
+        build_bank(image, extractor, config, device, tracker, depth_ratio) if config.gt2 or config.evaluate else None
+    )
     bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, device)
     matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
     tracker.end()
@@ -178,20 +212,34 @@ def _transfer(scene: GaussianScene, texture: np.ndarray | str | os.PathLike, vie
         metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
-    report["stylise"] = {**asdict(stats), "n_gaussians_start": len(original),
-                         "region": None if selected is None else int(selected.sum())}
-    report["skips"] = {"hidden": None if hidden is None else int(hidden.sum()),
-                       "sh_degree": [original.sh_degree, content_degree(original, config)],
-                       "bank_angles": len(bank.angles), "bank_rows_matched": len(matching),
-                       "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
-                       "dropped_views": dropped, "plateau_skipped": dict(stats.plateau_skipped)}
+    report["stylise"] = {
+        **asdict(stats),
+        "n_gaussians_start": len(original),
+        "region": None if selected is None else int(selected.sum()),
+    }
+    report["skips"] = {
+        "hidden": None if hidden is None else int(hidden.sum()),
+        "sh_degree": [original.sh_degree, content_degree(original, config)],
+        "bank_angles": len(bank.angles),
+        "bank_rows_matched": len(matching),
+        "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
+        "dropped_views": dropped,
+        "plateau_skipped": dict(stats.plateau_skipped),
+    }
     tracker.tell(1, 1, "done")
     return TransferResult(scene=work.to("cpu"), report=report)
 
 
 @torch.no_grad()
-def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: list[ViewTargets], bank: TextureBank,
-              extractor: FeatureExtractor, config: TransferConfig) -> dict:
+def _evaluate(
+    result: GaussianScene,
+    content: ViewSet,
+    used: ViewSet,
+    targets: list[ViewTargets],
+    bank: TextureBank,
+    extractor: FeatureExtractor,
+    config: TransferConfig,
+) -> dict:
     """The paper's metrics on the run's views, and texture match of the colour-transferred start
     (the content images of the ``used`` views, over the background as the result is measured)."""
     from ..features.lpips import load_lpips
@@ -205,11 +253,20 @@ def _evaluate(result: GaussianScene, content: ViewSet, used: ViewSet, targets: l
         lpips = None  # LPIPS weights not found: the lpips fields are reported as None
     images = torch.stack([stylised.composited(v) for v in range(len(cams))])
     originals = torch.stack([content.composited(v) for v in range(len(cams))])
-    metrics = evaluate(images, originals, torch.stack(stylised.depths), torch.stack(stylised.alphas), cams,
-                       lpips=lpips, extractor=extractor, bank_features=bank.features)
+    metrics = evaluate(
+        images,
+        originals,
+        torch.stack(stylised.depths),
+        torch.stack(stylised.alphas),
+        cams,
+        lpips=lpips,
+        extractor=extractor,
+        bank_features=bank.features,
+    )
     # the metric's own covered cells and background (as for the result), whatever the texture loss used
-    start_features = torch.cat([covered_features(extractor, t.content_image, alpha)
-                                for t, alpha in zip(targets, used.alphas)])
+    start_features = torch.cat(
+        [covered_features(extractor, t.content_image, alpha) for t, alpha in zip(targets, used.alphas)]
+    )
     metrics["texture_match_start"] = texture_match(start_features, bank.features)
     return metrics
 
@@ -221,8 +278,16 @@ def _weights_folder(path: str | None) -> str | None:
     return path if os.path.isdir(path) else os.path.dirname(path) or None
 
 
-def _report(config: TransferConfig, tracker: Tracker, scene: GaussianScene, cameras: Sequence[Camera],
-            extractor: FeatureExtractor, bank: TextureBank, metrics: dict | None, device: torch.device) -> dict:
+def _report(
+    config: TransferConfig,
+    tracker: Tracker,
+    scene: GaussianScene,
+    cameras: Sequence[Camera],
+    extractor: FeatureExtractor,
+    bank: TextureBank,
+    metrics: dict | None,
+    device: torch.device,
+) -> dict:
     return {
         "seconds": time.perf_counter() - tracker.start,
         "stage_seconds": dict(tracker.seconds),

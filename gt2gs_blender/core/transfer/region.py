@@ -1,9 +1,13 @@
 """Region control and the result's assembly: which Gaussians are restyled, what they start from,
 and how restyled, frozen and hidden Gaussians are put back together in a stable order."""
+
 from __future__ import annotations
+
 from dataclasses import replace
+
 import numpy as np
 import torch
+
 from ..errors import GT2GSError
 from ..scene.gaussians import GaussianScene, concat
 from .stylise import StyliseStats
@@ -14,8 +18,14 @@ def structure_changed(stats: StyliseStats) -> bool:
     return any(d["cloned"] or d["split"] or d["pruned"] for d in stats.densified)
 
 
-def assemble(work: GaussianScene, restyled: torch.Tensor | None, start: GaussianScene,
-              selected: torch.Tensor | None, hidden: torch.Tensor | None, changed: bool) -> GaussianScene:
+def assemble(
+    work: GaussianScene,
+    restyled: torch.Tensor | None,
+    start: GaussianScene,
+    selected: torch.Tensor | None,
+    hidden: torch.Tensor | None,
+    changed: bool,
+) -> GaussianScene:
     """The result from the optimised ``work`` scene and ``start`` (every input Gaussian as the run
     began: at the result's SH degree, before colour transfer), whose hidden rows come back as they are.
     Without a region: the original order when the hidden rows can go back to their places (no
@@ -29,7 +39,7 @@ def assemble(work: GaussianScene, restyled: torch.Tensor | None, start: Gaussian
         rows = (~hidden).nonzero().squeeze(1)
         return replace(start, **{k: v.index_copy(0, rows, work.tensors()[k]) for k, v in start.tensors().items()})
     parts = [start.subset(~selected)] + ([] if hidden is None else [start.subset(selected & hidden)])
-    return concat(parts + [work.subset(restyled)])
+    return concat([*parts, work.subset(restyled)])
 
 
 def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.device) -> torch.Tensor | None:

@@ -10,6 +10,7 @@
 
 (Hidden Gaussians are skipped in :mod:`.transfer`; the bank's disk cache is in :mod:`.texture_bank`.)
 """
+
 from __future__ import annotations
 
 import math
@@ -22,8 +23,8 @@ import torch
 import torch.nn.functional as F
 
 from ..cameras.camera import Camera
-from ..scene.gaussians import GaussianScene, sh_coeff_count
 from ..cameras.warp import expected_depth, warp_image
+from ..scene.gaussians import GaussianScene, sh_coeff_count
 
 SH_ZERO = 1e-6
 """A band whose coefficients are all at most this (absolute) contributes nothing visible."""
@@ -61,13 +62,17 @@ def texture_anisotropy(texture: np.ndarray, height: int = 128, sigma: float = AN
     gy = cv2.Sobel(grey, cv2.CV_32F, 0, 1, ksize=3)
     jxx, jyy, jxy = (cv2.GaussianBlur(a, (0, 0), sigma) for a in (gx * gx, gy * gy, gx * gy))
     trace = jxx + jyy
-    gap = np.sqrt((jxx - jyy) ** 2 + 4.0 * jxy ** 2)
+    gap = np.sqrt((jxx - jyy) ** 2 + 4.0 * jxy**2)
     total = float(trace.sum())
     return float(gap.sum() / total) if total > 1e-12 else 0.0
 
 
-def angles_for(anisotropy: float, n_angles: int, min_angles: int = MIN_ANGLES,
-               coherence_range: tuple[float, float] = ANISOTROPY_RANGE) -> int:
+def angles_for(
+    anisotropy: float,
+    n_angles: int,
+    min_angles: int = MIN_ANGLES,
+    coherence_range: tuple[float, float] = ANISOTROPY_RANGE,
+) -> int:
     """Angle count for a texture of this anisotropy: ``n_angles`` (the user's resolution) for an
     oriented texture, down to ``min_angles`` for an isotropic one, linearly in between; a divisor
     of ``n_angles`` so the angles are a subset of the full grid (and of its start angle)."""
@@ -79,8 +84,9 @@ def angles_for(anisotropy: float, n_angles: int, min_angles: int = MIN_ANGLES,
 
 
 # -- near-duplicate features -----------------------------------------------------------------------------
-def near_duplicates(features: torch.Tensor, blocks: torch.Tensor, threshold: float = 0.99,
-                    chunk: int = 2048) -> torch.Tensor:
+def near_duplicates(
+    features: torch.Tensor, blocks: torch.Tensor, threshold: float = 0.99, chunk: int = 2048
+) -> torch.Tensor:
     """Bool (M,): rows with an earlier row of the same block (e.g. the same depth group and angle)
     at cosine similarity above ``threshold``. Dropping them keeps every distinct feature: each
     dropped row has a twin before it (chains of twins are dropped down to their first row)."""
@@ -90,11 +96,13 @@ def near_duplicates(features: torch.Tensor, blocks: torch.Tensor, threshold: flo
         index = (blocks == b).nonzero().squeeze(1)
         x = rows[index]
         for start in range(0, len(x), chunk):
-            part = x[start:start + chunk]
-            sim = part @ x[:start + len(part)].T  # against every earlier-or-same row of the block
-            earlier = torch.arange(start + len(part), device=rows.device)[None] < \
-                (torch.arange(len(part), device=rows.device) + start)[:, None]
-            drop[index[start:start + len(part)]] = ((sim > threshold) & earlier).any(dim=1)
+            part = x[start : start + chunk]
+            sim = part @ x[: start + len(part)].T  # against every earlier-or-same row of the block
+            earlier = (
+                torch.arange(start + len(part), device=rows.device)[None]
+                < (torch.arange(len(part), device=rows.device) + start)[:, None]
+            )
+            drop[index[start : start + len(part)]] = ((sim > threshold) & earlier).any(dim=1)
     return drop
 
 
@@ -112,8 +120,14 @@ COVERAGE_SIZE = 64
 """Views are compared at this many pixels on the long side (coverage, not detail)."""
 
 
-def redundant_views(cameras: Sequence[Camera], depths: Sequence[torch.Tensor], alphas: Sequence[torch.Tensor],
-                    order: Sequence[int], min_new: float = 0.02, size: int = COVERAGE_SIZE) -> list[int]:
+def redundant_views(
+    cameras: Sequence[Camera],
+    depths: Sequence[torch.Tensor],
+    alphas: Sequence[torch.Tensor],
+    order: Sequence[int],
+    min_new: float = 0.02,
+    size: int = COVERAGE_SIZE,
+) -> list[int]:
     """Views (indices) to drop, visited in ``order``: a view is dropped when less than ``min_new``
     of its covered pixels are not already seen, by depth reprojection, in the views kept before it.
     The first view is always kept."""
@@ -132,16 +146,25 @@ def redundant_views(cameras: Sequence[Camera], depths: Sequence[torch.Tensor], a
         seen = torch.zeros_like(covered)
         for k in kept:
             kcam, kz, kalpha = small[k]
-            warp = warp_image(torch.zeros(*kz.shape, 1, dtype=kz.dtype), kz, kcam, cam, z, src_alpha=kalpha,
-                              dst_alpha=alpha, mode="nearest")
+            warp = warp_image(
+                torch.zeros(*kz.shape, 1, dtype=kz.dtype),
+                kz,
+                kcam,
+                cam,
+                z,
+                src_alpha=kalpha,
+                dst_alpha=alpha,
+                mode="nearest",
+            )
             seen |= warp.valid
         new = float((covered & ~seen).sum()) / max(1, int(covered.sum()))
         (dropped if new < min_new else kept).append(v)
     return sorted(dropped)
 
 
-def _downscale(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor, size: int
-               ) -> tuple[Camera, torch.Tensor, torch.Tensor]:
+def _downscale(
+    camera: Camera, depth: torch.Tensor, alpha: torch.Tensor, size: int
+) -> tuple[Camera, torch.Tensor, torch.Tensor]:
     """The camera scaled to ``size`` px on its long side, its expected depth and alpha resampled
     (nearest depth: no mixing of surfaces across edges)."""
     scale = min(1.0, size / max(camera.width, camera.height))
@@ -170,7 +193,7 @@ class Plateau:
         w = self.window
         if w < 1 or len(self.losses) < 2 * w:
             return False
-        before = sum(self.losses[-2 * w:-w]) / w
+        before = sum(self.losses[-2 * w : -w]) / w
         last = sum(self.losses[-w:]) / w
         if not (math.isfinite(before) and math.isfinite(last)):
             return False

@@ -17,6 +17,7 @@ regulariser (tolerating each Gaussian's starting elongation), so what densificat
 loss bent out of shape goes back.
 Gaussians outside the region never change (the optimiser's frozen rows).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -25,18 +26,17 @@ from dataclasses import dataclass, field
 
 import torch
 
-from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
-from ..cameras.camera import Camera
-from .config import TransferConfig
-from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
+from ..cameras.camera import Camera, camera_extent
 from ..features.extractor import FeatureExtractor
-from ..cameras.camera import camera_extent
-from ..train.reconstruction import reconstruction_loss
-from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
-from .losses import anisotropy, content_loss, cosine_distance, scale_regulariser, tv_loss
-from ..train.optim import GaussianAdam, LearningRates
 from ..render import render
 from ..scene.gaussians import GaussianScene
+from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
+from ..train.optim import GaussianAdam, LearningRates
+from ..train.reconstruction import reconstruction_loss
+from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
+from .config import TransferConfig
+from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
+from .losses import anisotropy, content_loss, cosine_distance, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
 
 GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
@@ -81,8 +81,16 @@ def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alpha
     order = view_order([t.camera for t in targets])
     for previous, current in itertools.pairwise(order):
         t, p = targets[current], targets[previous]
-        t.link = prior_link(t.camera, depths[current], alphas[current], p.camera, depths[previous], alphas[previous],
-                            tuple(t.mask.shape), tuple(p.mask.shape))
+        t.link = prior_link(
+            t.camera,
+            depths[current],
+            alphas[current],
+            p.camera,
+            depths[previous],
+            alphas[previous],
+            tuple(t.mask.shape),
+            tuple(p.mask.shape),
+        )
     return order
 
 
@@ -95,16 +103,28 @@ def frequency_levels(images: list[torch.Tensor], masks: list[torch.Tensor]) -> l
 class Styliser:
     """Runs the schedule of one transfer on ``scene`` (the colour-transferred working scene)."""
 
-    def __init__(self, scene: GaussianScene, views: list[ViewTargets], order: list[int], bank: TextureBank,
-                 extractor: FeatureExtractor, config: TransferConfig, background: torch.Tensor,
-                 frozen: torch.Tensor | None = None) -> None:
+    def __init__(
+        self,
+        scene: GaussianScene,
+        views: list[ViewTargets],
+        order: list[int],
+        bank: TextureBank,
+        extractor: FeatureExtractor,
+        config: TransferConfig,
+        background: torch.Tensor,
+        frozen: torch.Tensor | None = None,
+    ) -> None:
         self.views, self.order, self.bank, self.extractor, self.config = views, order, bank, extractor, config
         self.background = background
         self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
         self.colors = ("sh_dc", "sh_rest") if config.stylised_sh_degree > 0 else ("sh_dc",)
-        self.opt = GaussianAdam(scene, self._lrs(), trainable=self.colors, frozen=frozen,
-                                attachments={COLOR_ATTACHMENT: scene.base_colors.detach(),
-                                             RATIO_ATTACHMENT: self._ratio_limits(scene)})
+        self.opt = GaussianAdam(
+            scene,
+            self._lrs(),
+            trainable=self.colors,
+            frozen=frozen,
+            attachments={COLOR_ATTACHMENT: scene.base_colors.detach(), RATIO_ATTACHMENT: self._ratio_limits(scene)},
+        )
         self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
         self.stats = DensityStats(len(scene), "color", device=scene.device)
         self.max_gaussians = int(len(scene) * config.densify_max_growth)
@@ -116,8 +136,7 @@ class Styliser:
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
         when larger and ``scale_ratio_from_start`` (a fitted scene's thin Gaussians are its geometry)."""
-        limit = torch.full((len(scene),), float(self.config.scale_ratio_limit), dtype=scene.dtype,
-                           device=scene.device)
+        limit = torch.full((len(scene),), float(self.config.scale_ratio_limit), dtype=scene.dtype, device=scene.device)
         if not self.config.scale_ratio_from_start:
             return limit
         return torch.maximum(limit, anisotropy(scene.log_scales.detach()))
@@ -166,8 +185,11 @@ class Styliser:
         distances, weights = self._texture_terms(feats[0], v, view)
         counted = view.mask
         style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
-        loss = cfg.lambda_style * style + cfg.lambda_content * content_loss(feats, view.content_features) \
+        loss = (
+            cfg.lambda_style * style
+            + cfg.lambda_content * content_loss(feats, view.content_features)
             + cfg.lambda_tv * tv_loss(image[None])
+        )
         if cfg.stylise_geometry:
             loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
@@ -177,10 +199,18 @@ class Styliser:
         self.cursor = (self.cursor + 1) % len(self.order)
         self.report.stylise_steps += 1
         if densify and self.report.stylise_steps % cfg.densify_every == 0 and len(self.scene) < self.max_gaussians:
-            done = densify_and_prune(self.opt, self.stats, self.densify_config, self.extent, prune_large=False,
-                                     generator=self.generator)
-            self.report.densified.append({"step": self.report.stylise_steps, "cloned": done.cloned,
-                                          "split": done.split, "pruned": done.pruned, "total": done.total})
+            done = densify_and_prune(
+                self.opt, self.stats, self.densify_config, self.extent, prune_large=False, generator=self.generator
+            )
+            self.report.densified.append(
+                {
+                    "step": self.report.stylise_steps,
+                    "cloned": done.cloned,
+                    "split": done.split,
+                    "pruned": done.pruned,
+                    "total": done.total,
+                }
+            )
         shown = image.detach() + (1.0 - out.alphas[0].detach()[..., None]) * (self.background - view.backdrop)
         return float(style.detach()), shown
 
@@ -189,8 +219,14 @@ class Styliser:
         cfg = self.config
         prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
         # NNFM's bank is one unlabelled feature map: every cell matches all of it, whatever its depth group
-        match = match_with_prior(feats.detach(), self.bank, prior, cfg.lambda_prior if cfg.gt2 else 0.0,
-                                 view.groups if cfg.gt2 else None, view.mask)
+        match = match_with_prior(
+            feats.detach(),
+            self.bank,
+            prior,
+            cfg.lambda_prior if cfg.gt2 else 0.0,
+            view.groups if cfg.gt2 else None,
+            view.mask,
+        )
         self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
         c = feats.shape[0]
         targets = self.bank.features[match.indices.reshape(-1)].to(feats)
@@ -199,8 +235,12 @@ class Styliser:
             return distances, torch.ones_like(distances)
         phi = distortion(match) if cfg.gt2 else torch.zeros_like(distances)
         level = depth_level(view.groups, cfg.n_scales, distances)
-        weights = afcm_weight(level, view.frequency.to(distances), phi.to(distances),
-                              AFCMWeights(cfg.lambda_depth, cfg.lambda_frequency, cfg.lambda_distortion))
+        weights = afcm_weight(
+            level,
+            view.frequency.to(distances),
+            phi.to(distances),
+            AFCMWeights(cfg.lambda_depth, cfg.lambda_frequency, cfg.lambda_distortion),
+        )
         return distances, weights.detach()
 
     def _prior(self, v: int, view: ViewTargets) -> torch.Tensor:
@@ -221,10 +261,18 @@ class Styliser:
         v = int(torch.randint(len(self.views), (1,), generator=self.generator))
         view = self.views[v]
         colors = self.opt.attachments[COLOR_ATTACHMENT]
-        out = render(self.scene, [view.camera], colors=colors, background=self.background, backend=cfg.backend,
-                     render_depth=False)
-        loss = reconstruction_loss(out.colors[0], view.content_image, tolerance=CORRECT_TOLERANCE) + \
-            cfg.lambda_scale * self._scale_term()
+        out = render(
+            self.scene,
+            [view.camera],
+            colors=colors,
+            background=self.background,
+            backend=cfg.backend,
+            render_depth=False,
+        )
+        loss = (
+            reconstruction_loss(out.colors[0], view.content_image, tolerance=CORRECT_TOLERANCE)
+            + cfg.lambda_scale * self._scale_term()
+        )
         loss.backward()
         self._step(loss)
         self.report.correct_steps += 1

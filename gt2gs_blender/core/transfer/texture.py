@@ -17,6 +17,7 @@ Choices:
   conversion) with a warning: the bank uses a few hundred pixels of height per scale, and a 16k
   texture as float32 RGB alone would take 3 GiB. OpenCV refuses images above 2^30 pixels.
 """
+
 from __future__ import annotations
 
 import os
@@ -70,8 +71,10 @@ def _decode(data: np.ndarray, path: str | os.PathLike) -> np.ndarray:
 def _codec_problem(message: str) -> str:
     """A one-line reason for an OpenCV decoder exception."""
     if "OpenEXR codec is disabled" in message:
-        return ("EXR textures need OpenCV's OpenEXR codec, which is off by default: set the environment "
-                "variable OPENCV_IO_ENABLE_OPENEXR=1 before starting, or convert the texture to PNG/TIFF")
+        return (
+            "EXR textures need OpenCV's OpenEXR codec, which is off by default: set the environment "
+            "variable OPENCV_IO_ENABLE_OPENEXR=1 before starting, or convert the texture to PNG/TIFF"
+        )
     if "CV_IO_MAX_IMAGE_PIXELS" in message:
         return "the image has more than 2^30 pixels, more than OpenCV will decode"
     return f"OpenCV cannot decode the image ({message.strip().splitlines()[-1]})"
@@ -84,8 +87,11 @@ def _limit_size(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
         return image
     factor = MAX_SIDE / max(height, width)
     size = (max(1, round(width * factor)), max(1, round(height * factor)))
-    warnings.warn(f"{os.fspath(path)}: the texture is {width}x{height} px; downscaled to {size[0]}x{size[1]} "
-                  f"(at most {MAX_SIDE} px a side)", stacklevel=3)
+    warnings.warn(
+        f"{os.fspath(path)}: the texture is {width}x{height} px; downscaled to {size[0]}x{size[1]} "
+        f"(at most {MAX_SIDE} px a side)",
+        stacklevel=3,
+    )
     return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
 
 
@@ -95,10 +101,7 @@ def _to_rgb01(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     if values.ndim == 2:
         values = values[:, :, None]
     channels = values.shape[2]
-    if channels in (2, 4):
-        colour = _composite_alpha(values[:, :, :-1], values[:, :, -1], path)
-    else:
-        colour = values
+    colour = _composite_alpha(values[:, :, :-1], values[:, :, -1], path) if channels in (2, 4) else values
     if colour.shape[2] == 1:
         return np.ascontiguousarray(np.repeat(colour, 3, axis=2))
     return np.ascontiguousarray(colour[:, :, 2::-1])
@@ -111,8 +114,10 @@ def _unit_range(image: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     values = image.astype(np.float32)
     bad = int(np.count_nonzero(~np.isfinite(values)))
     if bad:
-        warnings.warn(f"{os.fspath(path)}: {bad} NaN/Inf texture samples were replaced (NaN and -Inf by 0, "
-                      "+Inf by 1)", stacklevel=2)
+        warnings.warn(
+            f"{os.fspath(path)}: {bad} NaN/Inf texture samples were replaced (NaN and -Inf by 0, +Inf by 1)",
+            stacklevel=2,
+        )
         values = np.nan_to_num(values, nan=0.0, posinf=1.0, neginf=0.0)
     if values.min() < 0.0 or values.max() > 1.0:
         warnings.warn(f"{os.fspath(path)}: float texture values outside [0, 1] were clipped", stacklevel=2)

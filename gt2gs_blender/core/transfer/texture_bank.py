@@ -27,6 +27,7 @@ over channels: ``K * n_angles * cells^2`` features in (k, theta, row, col) order
 Banks are cached as .npz files keyed by the decoded texture, every setting and the extractor id.
 :func:`feature_map_bank` is the NNFM baseline's bank instead: the texture's feature map as it is.
 """
+
 from __future__ import annotations
 
 import hashlib
@@ -75,7 +76,7 @@ class TextureBank:
     angles: tuple[float, ...]
     cells: int
     extractor_id: str
-    match_basis: torch.Tensor | None = None     # (C, d) projection for matching (PCA), None = full channels
+    match_basis: torch.Tensor | None = None  # (C, d) projection for matching (PCA), None = full channels
     match_features: torch.Tensor | None = None  # (M, d) unit rows of features @ match_basis
 
     def __len__(self) -> int:
@@ -83,10 +84,18 @@ class TextureBank:
 
     def to(self, device: torch.device | str) -> TextureBank:
         """The bank with its tensors on ``device``."""
+
         def move(t: torch.Tensor | None) -> torch.Tensor | None:
             return None if t is None else t.to(device)
-        return replace(self, features=self.features.to(device), k=self.k.to(device), theta=self.theta.to(device),
-                       match_basis=move(self.match_basis), match_features=move(self.match_features))
+
+        return replace(
+            self,
+            features=self.features.to(device),
+            k=self.k.to(device),
+            theta=self.theta.to(device),
+            match_basis=move(self.match_basis),
+            match_features=move(self.match_features),
+        )
 
 
 def compact_bank(bank: TextureBank, dedup_threshold: float = 0.0, pca_channels: int = 0) -> TextureBank:
@@ -99,8 +108,14 @@ def compact_bank(bank: TextureBank, dedup_threshold: float = 0.0, pca_channels: 
     out = bank
     if dedup_threshold > 0.0:
         keep = ~near_duplicates(bank.features, bank.k, dedup_threshold)
-        out = replace(bank, features=bank.features[keep], k=bank.k[keep], theta=bank.theta[keep],
-                      match_basis=None, match_features=None)
+        out = replace(
+            bank,
+            features=bank.features[keep],
+            k=bank.k[keep],
+            theta=bank.theta[keep],
+            match_basis=None,
+            match_features=None,
+        )
     if 0 < pca_channels < out.features.shape[1]:
         basis = pca_basis(out.features, pca_channels)
         rows = F.normalize(F.normalize(out.features.float(), dim=1) @ basis, dim=1, eps=1e-8)
@@ -157,8 +172,15 @@ def build_texture_bank(
         raise ValueError(f"texture must be (H, W, 3), got {image.shape}")
     scales = bank_scales(n_scales, depth_ratio_range)
     angles = tuple(sorted((angle_offset + i * 360.0 / n_angles) % 360.0 for i in range(n_angles)))
-    settings = {"scales": scales, "angles": angles, "texture_height": texture_height, "cells": cells,
-                "max_crop": max_crop, "extractor_id": extractor_id, "schema": CACHE_SCHEMA}
+    settings = {
+        "scales": scales,
+        "angles": angles,
+        "texture_height": texture_height,
+        "cells": cells,
+        "max_crop": max_crop,
+        "extractor_id": extractor_id,
+        "schema": CACHE_SCHEMA,
+    }
     path = None if cache_dir is None else Path(cache_dir) / f"bank-{_cache_key(image, settings)}.npz"
     cached = None if path is None or not path.is_file() else _load(path, settings)
     if cached is not None:
@@ -196,8 +218,15 @@ def feature_map_bank(
         feats = extractor(x)[0]
     c = feats.shape[0]
     rows = F.normalize(feats.float().reshape(c, -1).T, dim=1, eps=1e-8).cpu()
-    return TextureBank(features=rows, k=torch.zeros(len(rows), dtype=torch.long), theta=torch.zeros(len(rows)),
-                       scales=(1.0,), angles=(0.0,), cells=0, extractor_id=extractor_id)
+    return TextureBank(
+        features=rows,
+        k=torch.zeros(len(rows), dtype=torch.long),
+        theta=torch.zeros(len(rows)),
+        scales=(1.0,),
+        angles=(0.0,),
+        cells=0,
+        extractor_id=extractor_id,
+    )
 
 
 def _labelled(features: torch.Tensor, settings: dict) -> TextureBank:
@@ -208,7 +237,10 @@ def _labelled(features: torch.Tensor, settings: dict) -> TextureBank:
         features=features,
         k=torch.arange(len(scales)).repeat_interleave(len(angles) * per_crop),
         theta=torch.tensor(angles, dtype=torch.float32).repeat_interleave(per_crop).repeat(len(scales)),
-        scales=scales, angles=angles, cells=cells, extractor_id=settings["extractor_id"],
+        scales=scales,
+        angles=angles,
+        cells=cells,
+        extractor_id=settings["extractor_id"],
     )
 
 
@@ -270,8 +302,12 @@ def _rotated_features(
     batch = max(1, batch_pixels // (side * side))
     out = []
     for start in range(0, len(angles), batch):
-        crops = np.stack([rotate_crop(image, a, full)[margin:margin + side, margin:margin + side]
-                          for a in angles[start:start + batch]])
+        crops = np.stack(
+            [
+                rotate_crop(image, a, full)[margin : margin + side, margin : margin + side]
+                for a in angles[start : start + batch]
+            ]
+        )
         x = torch.from_numpy(crops).permute(0, 3, 1, 2).contiguous().to(device)
         with torch.no_grad():
             feats = extractor(x)
@@ -289,7 +325,7 @@ def _centre_cells(feats: torch.Tensor, cells: int, side: int) -> torch.Tensor:
             f"feature cells, fewer than the {cells}x{cells} kept; use a larger texture_height or fewer cells"
         )
     top, left = (h - cells) // 2, (w - cells) // 2
-    centre = feats[:, :, top:top + cells, left:left + cells].float()
+    centre = feats[:, :, top : top + cells, left : left + cells].float()
     return F.normalize(centre.permute(0, 2, 3, 1).reshape(-1, c), dim=1, eps=1e-8)
 
 
@@ -391,8 +427,9 @@ def pixel_cells(height: int, width: int, feature_hw: tuple[int, int], device: to
     return (rows[:, None] * w + cols[None, :]).reshape(-1)
 
 
-def covered_cells(alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: float = 0.5,
-                  fraction: float = 0.5) -> torch.Tensor:
+def covered_cells(
+    alpha: torch.Tensor, feature_hw: tuple[int, int], min_alpha: float = 0.5, fraction: float = 0.5
+) -> torch.Tensor:
     """Bool (…,h,w): feature cells more than ``fraction`` of whose pixels are covered (alpha >= ``min_alpha``;
     ``fraction`` 1: every pixel).
 

@@ -1,19 +1,22 @@
 """The run's views: cameras fitted to the scene, the original's renders from them, and the per-view
 targets the stylise phases match (content image, backdrop, covered cells, depth groups, AFCM level)."""
+
 from __future__ import annotations
+
 from collections.abc import Sequence
 from dataclasses import dataclass
+
 import torch
+
 from ..cameras.camera import Camera
 from ..cameras.generate import auto_views
-from .config import TransferConfig
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor
 from ..render import render
 from ..scene.gaussians import GaussianScene
+from .config import TransferConfig
 from .stylise import ViewTargets, frequency_levels
 from .texture_bank import cell_groups, covered_cells, depth_groups
-
 
 OBJECT_ALPHA = 0.9
 """Pixels above this alpha count as the object's own colour for the stylise backdrop."""
@@ -25,9 +28,9 @@ class ViewSet:
 
     cameras: list[Camera]
     premultiplied: list[torch.Tensor]  # (H,W,3) colour over black
-    alphas: list[torch.Tensor]         # (H,W)
-    depths: list[torch.Tensor]         # (H,W) expected depth sum(T alpha z)
-    background: torch.Tensor           # (3,)
+    alphas: list[torch.Tensor]  # (H,W)
+    depths: list[torch.Tensor]  # (H,W) expected depth sum(T alpha z)
+    background: torch.Tensor  # (3,)
 
     def composited(self, v: int, background: torch.Tensor | None = None) -> torch.Tensor:
         """View ``v`` over ``background`` (3,) (None: the run's background)."""
@@ -43,12 +46,18 @@ class ViewSet:
 
     def subset(self, keep: Sequence[int]) -> ViewSet:
         """The views ``keep`` (indices, in that order)."""
-        return ViewSet([self.cameras[v] for v in keep], [self.premultiplied[v] for v in keep],
-                       [self.alphas[v] for v in keep], [self.depths[v] for v in keep], self.background)
+        return ViewSet(
+            [self.cameras[v] for v in keep],
+            [self.premultiplied[v] for v in keep],
+            [self.alphas[v] for v in keep],
+            [self.depths[v] for v in keep],
+            self.background,
+        )
 
 
-def fit_cameras(scene: GaussianScene, views: Sequence[Camera] | int | None, resolution: int,
-                n_default: int) -> list[Camera]:
+def fit_cameras(
+    scene: GaussianScene, views: Sequence[Camera] | int | None, resolution: int, n_default: int
+) -> list[Camera]:
     """Automatic views (a count or None) or the given cameras resized so their longest side is ``resolution``."""
     if views is None or isinstance(views, int):
         return auto_views(scene, views or n_default, width=resolution, height=resolution)
@@ -59,8 +68,13 @@ def fit_cameras(scene: GaussianScene, views: Sequence[Camera] | int | None, reso
 
 
 @torch.no_grad()
-def render_views(scene: GaussianScene, cameras: Sequence[Camera], background: torch.Tensor,
-                 backend: str, sh_degree: int | None = None) -> ViewSet:
+def render_views(
+    scene: GaussianScene,
+    cameras: Sequence[Camera],
+    background: torch.Tensor,
+    backend: str,
+    sh_degree: int | None = None,
+) -> ViewSet:
     """Render every camera once (colour over black, alpha, depth), SH up to ``sh_degree`` (None = all)."""
     premultiplied, alphas, depths = [], [], []
     for cam in cameras:
@@ -76,8 +90,9 @@ def to_nchw(image: torch.Tensor) -> torch.Tensor:
 
 
 @torch.no_grad()
-def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig,
-                 backend: str) -> list[ViewTargets]:
+def view_targets(
+    views: ViewSet, start: GaussianScene, extractor: FeatureExtractor, config: TransferConfig, backend: str
+) -> list[ViewTargets]:
     """Per view: the content image (the colour-transferred start's render), the backdrop the stylise
     phases render over and the content features over it, the covered cells, each cell's depth group
     and the AFCM frequency level (of the content image: an outline is detail to keep)."""
@@ -85,13 +100,17 @@ def view_targets(views: ViewSet, start: GaussianScene, extractor: FeatureExtract
     images = [start_views.composited(v) for v in range(len(views.cameras))]
     backdrop = start_views.object_colour() if config.object_backdrop else views.background
     feats = [extractor(to_nchw(start_views.composited(v, backdrop))) for v in range(len(images))]
-    masks = [covered_cells(views.alphas[v], tuple(feats[v].shape[-2:]), fraction=config.cell_coverage)
-             for v in range(len(feats))]
+    masks = [
+        covered_cells(views.alphas[v], tuple(feats[v].shape[-2:]), fraction=config.cell_coverage)
+        for v in range(len(feats))
+    ]
     groups: list[torch.Tensor | None] = [None] * len(feats)
     if config.depth_groups and config.n_scales > 1:
         # all views at once, so a surface falls in the same depth group in every view
         pixel_groups = depth_groups(torch.stack(views.depths), torch.stack(views.alphas), config.n_scales)
         groups = [cell_groups(pixel_groups[v], tuple(feats[v].shape[-2:])) for v in range(len(feats))]
     levels = frequency_levels(images, masks)
-    return [ViewTargets(cam, image, backdrop, f, m, g, level)
-            for cam, image, f, m, g, level in zip(views.cameras, images, feats, masks, groups, levels)]
+    return [
+        ViewTargets(cam, image, backdrop, f, m, g, level)
+        for cam, image, f, m, g, level in zip(views.cameras, images, feats, masks, groups, levels)
+    ]

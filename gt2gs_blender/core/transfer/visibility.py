@@ -5,22 +5,23 @@ view empty; the transfer would then fail deep inside (the colour transfer has no
 "succeed" without changing anything. :func:`require_visible` turns that into one error naming the
 PLY, saying why nothing is seen and what to check.
 """
+
 from __future__ import annotations
 
 import os
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 
 from ..cameras.camera import Camera
-from .config import TransferConfig
+from ..device import resolve_device
 from ..errors import InputFileError
 from ..render import render
 from ..scene.gaussians import GaussianScene
-from .views import fit_cameras
+from .config import TransferConfig
 from .region import region_mask
-from ..device import resolve_device
+from .views import fit_cameras
 
 MIN_ALPHA = 1.0 / 255.0
 """3DGS's alpha rule: a Gaussian less opaque than this never adds to a pixel."""
@@ -37,9 +38,14 @@ def visible_in_any(scene: GaussianScene, cameras: Sequence[Camera], backend: str
     return False
 
 
-def require_visible(scene: GaussianScene, views: Sequence[Camera] | int | None, config: TransferConfig,
-                    ply_path: str | os.PathLike, views_source: str | None,
-                    region: torch.Tensor | np.ndarray | None = None) -> None:
+def require_visible(
+    scene: GaussianScene,
+    views: Sequence[Camera] | int | None,
+    config: TransferConfig,
+    ply_path: str | os.PathLike,
+    views_source: str | None,
+    region: torch.Tensor | np.ndarray | None = None,
+) -> None:
     """Raise InputFileError naming ``ply_path`` when the transfer's views (the cameras ``transfer`` makes
     from ``views``, ``config`` and ``region``) would show none of ``scene``; ``views_source`` names the
     cameras file the views came from (None: automatic views)."""
@@ -49,8 +55,9 @@ def require_visible(scene: GaussianScene, views: Sequence[Camera] | int | None, 
     device = resolve_device(config.device)
     scene = scene.detach().to(device)
     selected = region_mask(region, n, device)
-    cameras = fit_cameras(scene if selected is None else scene.subset(selected), views, config.resolution,
-                          config.n_views)
+    cameras = fit_cameras(
+        scene if selected is None else scene.subset(selected), views, config.resolution, config.n_views
+    )
     if visible_in_any(scene, cameras, config.backend):
         return
     where = f"the {len(cameras)} views of {views_source}" if views_source else f"the {len(cameras)} automatic views"
@@ -58,5 +65,6 @@ def require_visible(scene: GaussianScene, views: Sequence[Camera] | int | None, 
         why = f"all {n:,} Gaussians are fully transparent (opacity below 1/255); check the file's opacity values"
     else:
         why = f"all {n:,} Gaussians are behind the cameras or outside their images" + (
-            "; check that the cameras belong to this scene (same coordinate frame and scale)" if views_source else "")
+            "; check that the cameras belong to this scene (same coordinate frame and scale)" if views_source else ""
+        )
     raise InputFileError(ply_path, f"no Gaussian is visible in any of {where}: {why}")

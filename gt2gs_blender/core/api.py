@@ -1,0 +1,38 @@
+"""The engine as a Python library: read and write scenes, make or load cameras, render, re-texture.
+
+    from gt2gs_blender.core.api import read_ply, write_ply, auto_views, load_views, render, preset, transfer
+
+Everything here is defined in the engine's packages; this module only gathers the public names
+(importing it loads torch).
+"""
+
+from .cameras.camera import Camera
+from .cameras.files import load_views
+from .cameras.generate import auto_views
+from .errors import GT2GSError
+from .progress import Cancelled, Progress
+from .render import render
+from .scene.gaussians import GaussianScene
+from .scene.ply import read_ply
+from .scene.ply_write import write_ply
+from .transfer.config import TransferConfig
+from .transfer.pipeline import TransferResult, transfer
+from .transfer.presets import PRESETS, preset
+
+__all__ = [
+    "PRESETS",
+    "Camera",
+    "Cancelled",
+    "GT2GSError",
+    "GaussianScene",
+    "Progress",
+    "TransferConfig",
+    "TransferResult",
+    "auto_views",
+    "load_views",
+    "preset",
+    "read_ply",
+    "render",
+    "transfer",
+    "write_ply",
+]
