@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import math
 
-from ...core.render import BACKENDS
+from ...core.transfer.config import SETTINGS
 
 
-def _positive_int(text: str) -> int:
+def positive_int(text: str) -> int:
     try:
         value = int(text)
     except ValueError:
@@ -18,7 +18,7 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _positive_float(text: str) -> float:
+def positive_float(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
@@ -28,7 +28,7 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _floats(text: str, count: int, what: str) -> tuple[float, ...]:
+def floats(text: str, count: int, what: str) -> tuple[float, ...]:
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
@@ -38,21 +38,21 @@ def _floats(text: str, count: int, what: str) -> tuple[float, ...]:
     return values
 
 
-def _color(text: str) -> tuple[float, float, float]:
+def color(text: str) -> tuple[float, float, float]:
     """'R,G,B' in 0..1 (one number means grey)."""
-    values = _floats(text, 1, "") if "," not in text else _floats(text, 3, "R,G,B in 0..1")
+    values = floats(text, 1, "") if "," not in text else floats(text, 3, "R,G,B in 0..1")
     rgb = values * 3 if len(values) == 1 else values
     if not all(0.0 <= v <= 1.0 for v in rgb):
         raise argparse.ArgumentTypeError(f"colour components must be in 0..1, got {text!r}")
     return rgb  # type: ignore[return-value]
 
 
-def _up(text: str) -> str | tuple[float, float, float]:
+def up(text: str) -> str | tuple[float, float, float]:
     """'auto' or an 'x,y,z' vector."""
-    return "auto" if text == "auto" else _floats(text, 3, "'auto' or a vector x,y,z")  # type: ignore[return-value]
+    return "auto" if text == "auto" else floats(text, 3, "'auto' or a vector x,y,z")  # type: ignore[return-value]
 
 
-def _scene_options() -> argparse.ArgumentParser:
+def scene_options() -> argparse.ArgumentParser:
     parent = argparse.ArgumentParser(add_help=False)
     parent.add_argument(
         "--drop-invalid", action="store_true", help="load files with NaN/Inf Gaussians by dropping those Gaussians"
@@ -60,26 +60,31 @@ def _scene_options() -> argparse.ArgumentParser:
     return parent
 
 
-def _render_options() -> argparse.ArgumentParser:
+def render_options(
+    background: tuple[float, float, float] = (1.0, 1.0, 1.0), device: bool = True
+) -> argparse.ArgumentParser:
+    """The rendering options (background, rasterizer, device), worded as the transfer settings they set."""
     parent = argparse.ArgumentParser(add_help=False)
     group = parent.add_argument_group("rendering")
+    shown = ",".join(f"{v:g}" for v in background)
     group.add_argument(
         "--background",
-        type=_color,
-        default=(1.0, 1.0, 1.0),
+        type=color,
+        default=background,
         metavar="R,G,B",
-        help="background colour, components in 0..1 (default: 1,1,1 = white)",
+        help=f"{SETTINGS['background'].help}, components in 0..1 (default: {shown})",
     )
     group.add_argument(
         "--backend",
-        choices=("auto", *BACKENDS),
+        choices=SETTINGS["backend"].choices,
         default="auto",
-        help="rasterizer backend (default: auto = the fastest available)",
+        help=f"{SETTINGS['backend'].help} (default: auto)",
     )
-    group.add_argument(
-        "--device",
-        choices=("auto", "cpu", "cuda"),
-        default="auto",
-        help="torch device (default: auto = cuda when available, else cpu)",
-    )
+    if device:
+        group.add_argument(
+            "--device",
+            choices=SETTINGS["device"].choices,
+            default="auto",
+            help=f"{SETTINGS['device'].help} (default: auto)",
+        )
     return parent

@@ -18,7 +18,7 @@ from ...core.scene.ply import read_ply
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import _positive_int, _render_options, _scene_options
+from .args import positive_int, render_options, scene_options
 from .options import add_setting_arguments, config_from_args
 from .transfer import GIVEN
 
@@ -32,7 +32,7 @@ SHARED_WEIGHTS = SHARED / "weights"
 def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "demo",
-        parents=[debug, _scene_options(), _render_options()],
+        parents=[debug, scene_options(), render_options()],
         help="texture-transfer the demo scene (what `make demo` runs)",
         description="Re-texture the shared donut scene with a shared texture (or a generated torus and "
         "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "
@@ -46,7 +46,7 @@ def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--views",
         dest="n_views",
-        type=_positive_int,
+        type=positive_int,
         metavar="N",
         help="number of automatic views (default: the preset's)",
     )

@@ -7,15 +7,14 @@ from pathlib import Path
 from typing import Any
 
 from ...core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, fit_llff
-from ...core.render import BACKENDS
 from ..progress import TerminalProgress
-from .args import _color, _positive_int
+from .args import positive_int, render_options
 
 
 def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "fit",
-        parents=[debug],
+        parents=[debug, render_options(background=(0.0, 0.0, 0.0), device=False)],
         help="fit Gaussians to an LLFF capture (3DGS, random initialisation)",
         description="Reconstruct an LLFF capture (poses_bounds.npy + images_N/) from random points with 3DGS: "
         "every 8th view is held out and scored (PSNR, SSIM); the result is written in the INRIA "
@@ -25,21 +24,21 @@ def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument(
         "--iterations",
-        type=_positive_int,
+        type=positive_int,
         default=FitConfig.iterations,
         metavar="N",
         help=f"optimisation steps (default: {FitConfig.iterations})",
     )
     p.add_argument(
         "--downscale",
-        type=_positive_int,
+        type=positive_int,
         default=8,
         metavar="F",
         help="train on images F times smaller than the originals (default: 8)",
     )
     p.add_argument(
         "--points",
-        type=_positive_int,
+        type=positive_int,
         default=DEFAULT_POINTS,
         metavar="N",
         help=f"random initial points (default: {DEFAULT_POINTS:,})",
@@ -51,19 +50,6 @@ def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
         default=DEFAULT_SH_DEGREE,
         metavar="D",
         help=f"spherical-harmonic degree 0-3 (default: {DEFAULT_SH_DEGREE})",
-    )
-    p.add_argument(
-        "--background",
-        type=_color,
-        default=(0.0, 0.0, 0.0),
-        metavar="R,G,B",
-        help="background colour behind the Gaussians (default: 0,0,0 = black)",
-    )
-    p.add_argument(
-        "--backend",
-        choices=("auto", *BACKENDS),
-        default="auto",
-        help="rasterizer backend (default: auto = the fastest available)",
     )
     p.add_argument(
         "--report", type=Path, metavar="R.json", help="write {test_psnr, test_ssim, seconds, n_gaussians, ...} as JSON"

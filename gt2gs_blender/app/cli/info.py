@@ -12,7 +12,7 @@ from ...core.scene.gaussians import GaussianScene
 from ...core.scene.inria import NORMAL_NAMES
 from ...core.scene.ply import read_ply
 from ...core.scene.ply_header import read_ply_header
-from .args import _scene_options
+from .args import scene_options
 
 ROBUST_QUANTILE = 0.98
 """Robust bounds ignore the 2 % most extreme means on each side of each axis (as auto_views does)."""
@@ -21,7 +21,7 @@ ROBUST_QUANTILE = 0.98
 def _add_info(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "info",
-        parents=[debug, _scene_options()],
+        parents=[debug, scene_options()],
         help="count, SH degree, bounds and properties of a 3DGS .ply",
         description="Describe a 3D Gaussian Splatting .ply file.",
     )

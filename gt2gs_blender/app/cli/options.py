@@ -14,7 +14,7 @@ from typing import Any
 
 from ...core.transfer.config import PARTS, Setting, TransferConfig, user_settings
 from ...core.transfer.presets import DEFAULT_PRESET, PRESET_HELP, PRESETS, paper_value, preset
-from .args import _color
+from .args import color
 
 METAVARS = {"px": "PX", "°": "DEG", "steps": "N"}
 
@@ -52,7 +52,7 @@ def _argument_kind(meta: Setting, kind: type) -> dict[str, Any]:
     if kind is bool:
         return {"action": argparse.BooleanOptionalAction}
     if kind is tuple:
-        return {"type": _color, "metavar": "R,G,B"}
+        return {"type": color, "metavar": "R,G,B"}
     if meta.choices:
         return {"choices": meta.choices}
     if kind is str:

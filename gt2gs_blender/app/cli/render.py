@@ -25,7 +25,7 @@ from ...core.scene.gaussians import GaussianScene
 from ...core.scene.ply import read_ply
 from ..images import write_png
 from ..progress import TerminalProgress
-from .args import _positive_float, _positive_int, _render_options, _scene_options, _up
+from .args import positive_float, positive_int, render_options, scene_options, up
 
 BATCH = 4
 """Cameras rendered per rasterizer call: enough to amortise the per-call set-up, little memory."""
@@ -38,7 +38,7 @@ DEPTH_MIN_ALPHA = 0.1
 def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "render",
-        parents=[debug, _scene_options(), _render_options()],
+        parents=[debug, scene_options(), render_options()],
         help="render a 3DGS .ply to PNGs",
         description="Render a scene to DIR/view_000.png, ... and write the cameras used to DIR/cameras.json. "
         "Without --cameras, N views on a ring fitted to the scene are generated.",
@@ -52,10 +52,10 @@ def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
         metavar="FILE_OR_DIR",
         help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
     )
-    source.add_argument("--views", type=_positive_int, metavar="N", help="generate N views (default: 8)")
-    p.add_argument("--width", type=_positive_int, metavar="W", help="generated views' width (default: 512)")
-    p.add_argument("--height", type=_positive_int, metavar="H", help="generated views' height (default: W)")
-    p.add_argument("--scale", type=_positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
+    source.add_argument("--views", type=positive_int, metavar="N", help="generate N views (default: 8)")
+    p.add_argument("--width", type=positive_int, metavar="W", help="generated views' width (default: 512)")
+    p.add_argument("--height", type=positive_int, metavar="H", help="generated views' height (default: W)")
+    p.add_argument("--scale", type=positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
     p.add_argument(
         "--kind",
         choices=("orbit", "arc"),
@@ -64,7 +64,7 @@ def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--up",
-        type=_up,
+        type=up,
         default=(0.0, 0.0, 1.0),
         metavar="auto|X,Y,Z",
         help="the scene's up axis for generated views (default: 0,0,1, Blender's)",

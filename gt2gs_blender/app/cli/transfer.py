@@ -12,7 +12,7 @@ from ...core.cameras.llff import load_llff
 from ...core.scene.ply import read_ply
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import _render_options, _scene_options
+from .args import render_options, scene_options
 from .options import add_setting_arguments, config_from_args
 
 
@@ -75,7 +75,7 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``transfer`` subcommand."""
     p = commands.add_parser(
         "transfer",
-        parents=[debug, _scene_options(), _render_options()],
+        parents=[debug, scene_options(), render_options()],
         help="re-texture a 3DGS .ply with a texture photo (GT²-GS)",
         description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
         "writes the stylised scene to OUT.ply.",
