@@ -23,6 +23,10 @@ class PlyFormatError(InputFileError):
     """A PLY file is malformed or is not a 3D Gaussian Splatting file."""
 
 
+class SplatFormatError(InputFileError):
+    """A splat file (compressed PLY, SOG, SPZ, .splat) is malformed, truncated or of an unknown version."""
+
+
 class CameraFileError(InputFileError):
     """A camera/pose file (cameras.json, poses_bounds.npy, COLMAP model) is malformed."""
 

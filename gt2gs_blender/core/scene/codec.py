@@ -1,0 +1,141 @@
+"""What every splat file format's reader and writer shares: activations, colours, quaternions, the checked
+``SplatArrays`` a reader returns, capped decompression and atomic output. numpy only.
+
+Quantised formats store activated values (linear or log scale, opacity in 0..1, colour in 0..1); the
+engine keeps 3DGS's raw parameters (log scales, opacity logits, SH coefficients). The conversions
+here are the one place where the two meet, written to be stable at the ends of their ranges.
+"""
+
+from __future__ import annotations
+
+import gzip
+import io
+import os
+import warnings
+import zlib
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import SplatFormatError
+from .inria import SH_C0
+from .ply import SplatArrays
+
+if TYPE_CHECKING:
+    from .gaussians import GaussianScene
+
+PathLike = str | os.PathLike
+
+MAX_DECOMPRESSED = 8 * 2**30
+"""Largest decompressed payload a reader accepts (about 60M splats of SH degree 3): beyond it a file is a
+decompression bomb, not a scene."""
+OPACITY_EPS = 1e-6
+"""Opacities are clipped to [eps, 1 - eps] before the logit, so 0 and 1 in a file stay finite."""
+
+
+def sigmoid(x: np.ndarray) -> np.ndarray:
+    """The logistic function, without overflow for large |x|."""
+    x = np.asarray(x, np.float64)
+    return np.exp(-np.logaddexp(0.0, -x))
+
+
+def logit(p: np.ndarray, eps: float = OPACITY_EPS) -> np.ndarray:
+    """The inverse of :func:`sigmoid`, with p clipped to [eps, 1 - eps] so it is always finite."""
+    p = np.clip(np.asarray(p, np.float64), eps, 1.0 - eps)
+    return np.log(p) - np.log1p(-p)
+
+
+def colour_from_dc(sh_dc: np.ndarray) -> np.ndarray:
+    """Base colour (0..1 in a well-formed scene, not clipped) of DC SH coefficients."""
+    return 0.5 + SH_C0 * np.asarray(sh_dc, np.float64)
+
+
+def dc_from_colour(colour: np.ndarray) -> np.ndarray:
+    """DC SH coefficients of a base colour (the inverse of :func:`colour_from_dc`)."""
+    return (np.asarray(colour, np.float64) - 0.5) / SH_C0
+
+
+def canonical_quats(quats: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) with w >= 0 (q and -q are one rotation); a zero quaternion becomes
+    the identity."""
+    q = np.asarray(quats, np.float64)
+    norm = np.linalg.norm(q, axis=-1, keepdims=True)
+    unit = np.where(norm > 0.0, q / np.where(norm > 0.0, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
+    return np.where(unit[..., :1] < 0.0, -unit, unit)
+
+
+def as_arrays(scene: GaussianScene | SplatArrays) -> SplatArrays:
+    """A scene as numpy arrays (a ``GaussianScene``'s tensors are copied to the CPU)."""
+    if isinstance(scene, SplatArrays):
+        return scene
+    values = {key: tensor.detach().cpu().numpy() for key, tensor in scene.tensors().items()}
+    return SplatArrays(**values, extras=dict(scene.extras), ply_layout=None)
+
+
+def make_arrays(
+    path: PathLike,
+    *,
+    means: np.ndarray,
+    quats: np.ndarray,
+    log_scales: np.ndarray,
+    opacity_logits: np.ndarray,
+    sh_dc: np.ndarray,
+    sh_rest: np.ndarray,
+    drop_invalid: bool = False,
+) -> SplatArrays:
+    """The ``SplatArrays`` a reader returns: float32, shapes checked, and Gaussians with NaN/Inf values an
+    error naming ``path`` (or, with ``drop_invalid``, dropped with a warning), as for PLY files."""
+    arrays = {
+        "means": means,
+        "quats": quats,
+        "log_scales": log_scales,
+        "opacity_logits": opacity_logits,
+        "sh_dc": sh_dc,
+        "sh_rest": sh_rest,
+    }
+    n = len(means)
+    expected = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,), "sh_dc": (n, 3)}
+    with np.errstate(over="ignore", invalid="ignore"):
+        arrays = {key: np.ascontiguousarray(values, np.float32) for key, values in arrays.items()}
+    for key, shape in expected.items():
+        if arrays[key].shape != shape:
+            raise SplatFormatError(path, f"{key} has shape {arrays[key].shape}, expected {shape}")
+    if arrays["sh_rest"].ndim != 3 or arrays["sh_rest"].shape[0] != n or arrays["sh_rest"].shape[2] != 3:
+        raise SplatFormatError(path, f"SH coefficients have shape {arrays['sh_rest'].shape}, expected ({n}, K, 3)")
+    finite = np.ones(n, bool)
+    for values in arrays.values():
+        if not np.isfinite(values).all():
+            finite &= np.isfinite(values).reshape(n, -1).all(axis=1)
+    n_bad = n - int(finite.sum())
+    if n_bad:
+        if not drop_invalid:
+            raise SplatFormatError(
+                path,
+                f"{n_bad} of {n} Gaussians have non-finite values (NaN or Inf); use --drop-invalid "
+                "(drop_invalid=True) to load the file without them",
+            )
+        warnings.warn(f"{os.fspath(path)}: dropped {n_bad} of {n} Gaussians with non-finite values", stacklevel=3)
+        arrays = {key: values[finite] for key, values in arrays.items()}
+    return SplatArrays(**arrays, extras={}, ply_layout=None)
+
+
+def gunzip(path: PathLike, data: bytes, limit: int = MAX_DECOMPRESSED) -> bytes:
+    """Decompress gzip ``data`` read from ``path``, refusing more than ``limit`` bytes (a gzip bomb) and
+    reporting a corrupt or truncated stream as one error naming the file."""
+    try:
+        with gzip.GzipFile(fileobj=io.BytesIO(data)) as stream:
+            out = stream.read(limit + 1)
+    except (OSError, EOFError, zlib.error) as exc:
+        raise SplatFormatError(path, f"the gzip stream is corrupt or truncated ({exc})") from None
+    if len(out) > limit:
+        raise SplatFormatError(path, f"decompresses to more than {limit / 2**30:.0f} GiB: not a splat file")
+    return out
+
+
+def read_bytes(path: PathLike) -> bytes:
+    """A whole file's bytes; a missing or unreadable file is one error naming it."""
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError as exc:
+        raise SplatFormatError(path, f"cannot read the file ({exc.strerror or exc})") from None

@@ -1,0 +1,53 @@
+"""The oracle for the splat formats: PlayCanvas splat-transform (npm, pinned in package.json), and the
+scenes the format tests convert with it."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SPLAT_TRANSFORM = ROOT / "node_modules" / ".bin" / "splat-transform"
+DONUT = ROOT.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
+
+
+def splat_transform(*args: str | Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run splat-transform (``-w``: overwrite) on files; fails the test with its output when it fails."""
+    if not SPLAT_TRANSFORM.is_file() or shutil.which("node") is None:
+        pytest.skip(f"splat-transform is not installed at {SPLAT_TRANSFORM}: run `npm ci` (make test does)")
+    result = subprocess.run(
+        [str(SPLAT_TRANSFORM), "-w", *map(str, args)], capture_output=True, text=True, timeout=timeout
+    )
+    assert result.returncode == 0, f"splat-transform {' '.join(map(str, args))} failed:\n{result.stdout}{result.stderr}"
+    return result
+
+
+def synthetic_scene(n: int = 2000, sh_degree: int = 3, seed: int = 0):
+    """A small random scene with every SH band used: positions in a 2-unit box, log scales -5..-1,
+    random unit quaternions, opacity logits -4..4, DC -1.5..1.5, rest bands -0.3..0.3 (SplatArrays)."""
+    from gt2gs_blender.core.scene.ply import SplatArrays
+
+    rng = np.random.default_rng(seed)
+    quats = rng.normal(size=(n, 4))
+    quats /= np.linalg.norm(quats, axis=1, keepdims=True)
+    k = (sh_degree + 1) ** 2 - 1
+    return SplatArrays(
+        means=rng.uniform(-1, 1, (n, 3)).astype(np.float32),
+        quats=quats.astype(np.float32),
+        log_scales=rng.uniform(-5, -1, (n, 3)).astype(np.float32),
+        opacity_logits=rng.uniform(-4, 4, n).astype(np.float32),
+        sh_dc=rng.uniform(-1.5, 1.5, (n, 3)).astype(np.float32),
+        sh_rest=rng.uniform(-0.3, 0.3, (n, k, 3)).astype(np.float32),
+        extras={},
+    )
+
+
+def donut_path() -> Path:
+    """The shared donut, or a skip that says where it was looked for."""
+    if not DONUT.is_file():
+        pytest.skip(f"shared donut scene not found at {DONUT}")
+    return DONUT
