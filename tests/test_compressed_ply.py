@@ -302,7 +302,7 @@ def test_writer_notes_what_it_drops(tmp_path):
     source.log_scales[1, 2] = -25.0
     notes = write_compressed_ply(tmp_path / "a.compressed.ply", source)
     assert len(notes) == 3 and all("\n" not in note for note in notes), notes
-    assert "label, nx" in notes[0] and "1 log scales" in notes[1] and "1 SH coefficients" in notes[2]
+    assert "nx, label" in notes[0] and "1 log scales" in notes[1] and "1 SH coefficients" in notes[2]
     decoded = read_compressed_ply(tmp_path / "a.compressed.ply")
     assert decoded.sh_rest[0, 0, 0] == pytest.approx(4.0) and decoded.log_scales[1, 2] == pytest.approx(-20.0)
 

@@ -45,6 +45,7 @@ from .codec import (
     canonical_quats,
     colour_from_dc,
     dc_from_colour,
+    dropped_notes,
     logit,
     make_arrays,
     read_bytes,
@@ -370,9 +371,7 @@ def _header(n: int, n_chunks: int, k: int) -> bytes:
 
 def _notes(arrays: SplatArrays) -> list[str]:
     """One line for each kind of information the compressed PLY did not keep."""
-    notes = []
-    if arrays.extras:
-        notes.append(f"dropped extra properties the format cannot hold: {', '.join(sorted(arrays.extras))}")
+    notes = dropped_notes(arrays, "compressed PLY", 3)
     n_scales = int(np.count_nonzero(np.abs(arrays.log_scales) > SCALE_LIMIT))
     if n_scales:
         notes.append(f"clamped {n_scales} log scales outside [-{SCALE_LIMIT:g}, {SCALE_LIMIT:g}]")
