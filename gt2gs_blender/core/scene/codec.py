@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import SplatFormatError
-from .inria import SH_C0
+from .inria import SH_C0, sh_degree_from_rest
 from .ply import SplatArrays
 
 if TYPE_CHECKING:
@@ -139,3 +139,15 @@ def read_bytes(path: PathLike) -> bytes:
             return f.read()
     except OSError as exc:
         raise SplatFormatError(path, f"cannot read the file ({exc.strerror or exc})") from None
+
+
+def dropped_notes(arrays: SplatArrays, fmt: str, keeps_sh_degree: int) -> list[str]:
+    """One line per kind of information a format that keeps SH up to ``keeps_sh_degree`` and no extra
+    properties drops from ``arrays`` (nothing for what it only stores at lower precision)."""
+    notes = []
+    degree = sh_degree_from_rest(arrays.sh_rest.shape[1])
+    if degree > keeps_sh_degree and np.any(arrays.sh_rest[:, (keeps_sh_degree + 1) ** 2 - 1 :]):
+        notes.append(f"{fmt} keeps SH degree {keeps_sh_degree} at most: bands {keeps_sh_degree + 1}-{degree} dropped")
+    if arrays.extras:
+        notes.append(f"{fmt} keeps no extra properties: {', '.join(arrays.extras)} dropped")
+    return notes
