@@ -24,3 +24,11 @@ def shared() -> Path:
     if not SHARED.is_dir():
         pytest.skip(f"shared data folder not found at {SHARED}")
     return SHARED
+
+
+@pytest.fixture(scope="session")
+def donut_files(tmp_path_factory) -> dict:
+    """The shared donut in every splat format (see ``splat_tools.donut_in_every_format``), made once."""
+    from .splat_tools import donut_in_every_format
+
+    return donut_in_every_format(tmp_path_factory.mktemp("formats"))

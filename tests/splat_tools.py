@@ -51,3 +51,21 @@ def donut_path() -> Path:
     if not DONUT.is_file():
         pytest.skip(f"shared donut scene not found at {DONUT}")
     return DONUT
+
+
+MADE_BY_SPLAT_TRANSFORM = {"compressed-ply": "donut.compressed.ply", "sog": "donut.sog", "spz": "donut.spz"}
+
+
+def donut_in_every_format(folder: Path) -> dict[str, Path]:
+    """The donut in every format, by format name: the shared PLY, three files splat-transform made from it,
+    and a .splat our writer made (splat-transform does not write .splat)."""
+    from gt2gs_blender.core.scene.files import write_splats
+    from gt2gs_blender.core.scene.ply import read_ply_arrays
+
+    files = {"ply": donut_path()}
+    for fmt, name in MADE_BY_SPLAT_TRANSFORM.items():
+        splat_transform(files["ply"], folder / name)
+        files[fmt] = folder / name
+    files["splat"] = folder / "donut.splat"
+    write_splats(files["splat"], read_ply_arrays(files["ply"]))
+    return files

@@ -16,6 +16,7 @@ LIGHT = (
     "gt2gs_blender.core.scene.inria",
     "gt2gs_blender.core.scene.ply",
     "gt2gs_blender.core.scene.ply_write",
+    "gt2gs_blender.core.scene.files",
     "gt2gs_blender.core.transfer.config",
     "gt2gs_blender.core.transfer.presets",
     "gt2gs_blender.app.protocol",
@@ -43,11 +44,11 @@ def test_what_blender_imports_loads_without_torch():
 def test_the_readme_example_runs(tmp_path):
     """The README's Python API example, on a tiny generated scene and texture."""
     from gt2gs_blender.app.cli.demo import stripes_texture, torus_scene
-    from gt2gs_blender.core.api import preset, read_ply, transfer, write_ply
+    from gt2gs_blender.core.api import preset, read_scene, transfer, write_splats
 
-    write_ply(tmp_path / "point_cloud.ply", torus_scene(n_major=24, n_minor=12))
-    scene = read_ply(tmp_path / "point_cloud.ply")
+    write_splats(tmp_path / "point_cloud.ply", torus_scene(n_major=24, n_minor=12))
+    scene = read_scene(tmp_path / "point_cloud.ply")
     config = preset("preview", angle=30.0, stylise_steps=2, correct_steps=2, resolution=32, evaluate=False)
     result = transfer(scene, stripes_texture(64), views=3, config=config)
-    write_ply(tmp_path / "stylised.ply", result.scene)
-    assert len(read_ply(tmp_path / "stylised.ply")) == len(result.scene) >= len(scene)
+    assert write_splats(tmp_path / "stylised.spz", result.scene) == []
+    assert len(read_scene(tmp_path / "stylised.spz")) == len(result.scene) >= len(scene)

@@ -7,6 +7,7 @@ Hypothesis generates the bad inputs (about 500 per run); every example runs unde
 
 from __future__ import annotations
 
+import gzip
 import hashlib
 import io
 import json
@@ -33,6 +34,7 @@ from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_came
 from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.errors import CameraFileError, InputFileError, PlyFormatError
 from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.files import write_splats
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.ply import read_ply, read_ply_arrays
 from gt2gs_blender.core.scene.ply_header import read_ply_header
@@ -769,3 +771,41 @@ def test_cli_transfer_of_a_scene_nothing_of_which_can_show_is_one_error(inputs, 
         else "the file holds no Gaussians"
     ) in err
     assert not (tmp_path / "o.ply").exists()
+
+
+# -- broken splat files of every format -------------------------------------------------------------
+
+
+def broken_splat_files(folder: Path, donut_files: dict) -> dict[str, Path]:
+    """One damaged file per kind of damage the splat readers must name: truncation, wrong magic, a zip
+    without meta.json, a WebP that does not decode, a chunk count that does not match, an unknown version."""
+    import zipfile
+
+    folder.mkdir(exist_ok=True)
+    write_splats(folder / "ours.spz", read_ply_arrays(donut_files["ply"]))  # version 3: a gzip stream
+    payload = gzip.decompress((folder / "ours.spz").read_bytes())
+    sog, compressed = (donut_files[f].read_bytes() for f in ("sog", "compressed-ply"))
+    cases = {
+        "truncated.spz": gzip.compress(payload[: len(payload) // 2]),
+        "magic.spz": gzip.compress(b"XXXX" + payload[4:]),
+        "version.spz": gzip.compress(b"NGSP" + (9).to_bytes(4, "little") + payload[8:]),
+        "truncated.sog": sog[: len(sog) // 2],
+        "truncated.compressed.ply": compressed[: len(compressed) // 2],
+        "chunks.compressed.ply": compressed.replace(b"element chunk 179", b"element chunk 178", 1),
+        "cut.splat": b"\0" * 40,
+    }
+    for name, data in cases.items():
+        (folder / name).write_bytes(data)
+    with zipfile.ZipFile(folder / "no_meta.sog", "w") as z:
+        z.writestr("means_l.webp", b"RIFF")
+    with zipfile.ZipFile(donut_files["sog"]) as source, zipfile.ZipFile(folder / "webp.sog", "w") as z:
+        for item in source.infolist():
+            z.writestr(item, b"RIFF\0\0\0\0WEBPbroken" if item.filename.endswith(".webp") else source.read(item))
+    return {name: folder / name for name in [*cases, "no_meta.sog", "webp.sog"]}
+
+
+def test_every_broken_splat_file_is_one_line_naming_it(tmp_path, capsys, donut_files):
+    for name, path in broken_splat_files(tmp_path / "broken", donut_files).items():
+        code, _, err = cli_run(capsys, "info", str(path))
+        assert code == 2 and err.count("\n") == 1, (name, err)
+        assert err.startswith(f"gt2gs: error: {path}: "), (name, err)

@@ -89,7 +89,7 @@ def test_info_shared_donut(capsys):
     code, out, _ = run(capsys, "info", str(DONUT), "--json")
     info = json.loads(out)
     assert code == 0
-    assert (info["count"], info["sh_degree"], info["format"]) == (45624, 0, "binary_little_endian")
+    assert (info["count"], info["sh_degree"], info["encoding"]) == (45624, 0, "binary_little_endian")
 
 
 def test_info_as_subprocess(small_ply):
@@ -226,7 +226,7 @@ def test_internal_error_exit_code_1(capsys, small_ply, monkeypatch):
     def broken(*args, **kwargs):
         raise RuntimeError("boom")
 
-    monkeypatch.setattr(info, "read_ply", broken)
+    monkeypatch.setattr(info, "read_scene", broken)
     code, _, err = run(capsys, "info", str(small_ply))
     assert code == 1
     assert_one_line_error(err, "internal error", "--debug", "boom")

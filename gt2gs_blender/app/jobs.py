@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -23,8 +24,8 @@ from ..core.cameras.generate import auto_views
 from ..core.errors import InputFileError
 from ..core.progress import ProgressCallback
 from ..core.render import render
+from ..core.scene.files import write_splats
 from ..core.scene.gaussians import GaussianScene
-from ..core.scene.ply_write import write_ply
 from ..core.transfer.config import TransferConfig
 from ..core.transfer.pipeline import TransferResult, transfer
 from ..core.transfer.texture import load_texture
@@ -78,13 +79,15 @@ def run_transfer(
     scene_name: str | os.PathLike = "the scene",
     views_name: str | None = None,
 ) -> TransferResult:
-    """Check that the views see the scene, re-texture it, write the result PLY (and the report).
+    """Check that the views see the scene, re-texture it, write the result in the format ``output``'s name
+    says (any writable splat format; what it drops is a warning) and the report.
 
     ``scene_name`` and ``views_name`` are what an error calls the scene and the views (None: automatic).
     """
     require_visible(scene, views, config, scene_name, views_name, region)
     result = transfer(scene, texture, views, config, region=region, progress=progress, cancel=cancel)
-    write_ply(output, result.scene)
+    for note in write_splats(output, result.scene):
+        warnings.warn(f"{output}: {note}", stacklevel=2)
     if report is not None:
         atomic_write(report, json.dumps(result.report, indent=1, default=str))
     return result

@@ -73,11 +73,11 @@ def _config(spec: JobSpec):
 
 def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
     """Run the texture transfer (``jobs.run_transfer``), sending progress and preview frames as events."""
-    from ..core.scene.ply import read_ply
+    from ..core.scene.files import read_scene
     from .images import write_png
     from .jobs import load_region, read_texture, run_transfer
 
-    scene = read_ply(spec.input)
+    scene = read_scene(spec.input)
     texture, config, views = read_texture(spec.texture), _config(spec), _views(spec)
     region = None if spec.region is None else load_region(spec.region, len(scene))
     views_name = spec.views_name or (str(spec.views) if isinstance(spec.views, Path) else None)
@@ -122,12 +122,12 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
 def run_preview(spec: JobSpec, events: Events) -> None:
     """Render the orientation preview of the first view as a PNG."""
     from ..core.cameras.generate import auto_views
-    from ..core.scene.ply import read_ply
+    from ..core.scene.files import read_scene
     from ..core.transfer.orientation_preview import orientation_preview
     from .images import write_png
     from .jobs import read_texture
 
-    scene = read_ply(spec.input)
+    scene = read_scene(spec.input)
     config = _config(spec)
     views = _views(spec)
     camera = (

@@ -1,6 +1,7 @@
-"""The engine as a Python library: read and write scenes, make or load cameras, render, re-texture.
+"""The engine as a Python library: read and write scenes (every splat format), make or load cameras, render,
+re-texture.
 
-    from gt2gs_blender.core.api import read_ply, write_ply, auto_views, load_views, render, preset, transfer
+    from gt2gs_blender.core.api import read_scene, write_splats, auto_views, load_views, render, preset, transfer
 
 Everything here is defined in the engine's packages; this module only gathers the public names
 (importing it loads torch).
@@ -12,6 +13,7 @@ from .cameras.generate import auto_views
 from .errors import GT2GSError
 from .progress import Cancelled, Progress
 from .render import render
+from .scene.files import FORMATS, read_scene, read_splats, write_splats
 from .scene.gaussians import GaussianScene
 from .scene.ply import read_ply
 from .scene.ply_write import write_ply
@@ -20,6 +22,7 @@ from .transfer.pipeline import TransferResult, transfer
 from .transfer.presets import PRESETS, preset
 
 __all__ = [
+    "FORMATS",
     "PRESETS",
     "Camera",
     "Cancelled",
@@ -32,7 +35,10 @@ __all__ = [
     "load_views",
     "preset",
     "read_ply",
+    "read_scene",
+    "read_splats",
     "render",
     "transfer",
     "write_ply",
+    "write_splats",
 ]

@@ -1,4 +1,4 @@
-"""File ▸ Export ▸ Gaussian Splat (.ply): the active splat object back to an INRIA PLY file."""
+"""File ▸ Export ▸ Gaussian Splat: the active splat object as an INRIA PLY, compressed PLY, SPZ or .splat file."""
 
 from __future__ import annotations
 
@@ -10,13 +10,21 @@ from bpy_extras.io_utils import ExportHelper
 
 from ..blender import splats
 from ..blender.registration import ClassesWithMenu
+from ..core.scene.files import FORMATS, PLY, WRITERS
 from .io_import import engine_missing_message
 
-FORMATS = {
+ENCODINGS = {
     "SOURCE": None,
     "BINARY": "binary_little_endian",
     "ASCII": "ascii",
 }
+FILE_FORMATS = (
+    ("AUTO", "From File Name", "The format the file name ends with (.ply when it names none)"),
+    *((fmt, FORMATS[fmt].label, f"{FORMATS[fmt].extensions[0]}: keeps {FORMATS[fmt].keeps}") for fmt in WRITERS),
+)
+
+EXPORT_GLOB = ";".join(f"*{FORMATS[fmt].extensions[0]}" for fmt in WRITERS)
+"""What the file browser shows (Blender evaluates property annotations apart from the module's names)."""
 
 
 def export_target(context):
@@ -29,14 +37,16 @@ def export_target(context):
 
 
 class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
-    """Export the active Gaussian splat object as a 3D Gaussian Splatting .ply file"""
+    """Export the active Gaussian splat object as a splat file (PLY, compressed PLY, SPZ or .splat)"""
 
     bl_idname = "gt2gs.export_ply"
     bl_label = "Export Gaussian Splat"
     bl_options = {"REGISTER"}
 
     filename_ext = ".ply"
-    filter_glob: StringProperty(default="*.ply", options={"HIDDEN"})
+    check_extension = None  # the name's ending chooses the format unless File Format names one (see check)
+    filter_glob: StringProperty(default=EXPORT_GLOB, options={"HIDDEN"})
+    file_format: EnumProperty(name="File Format", items=FILE_FORMATS, default="AUTO")
 
     bake_transform: BoolProperty(
         name="Apply Object Transform",
@@ -45,7 +55,7 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
         default=False,
     )
     ply_format: EnumProperty(
-        name="Format",
+        name="PLY Encoding",
         items=(
             ("SOURCE", "As Imported", "The imported file's encoding (binary little-endian for other objects)"),
             ("BINARY", "Binary", "binary_little_endian, what 3DGS tools write"),
@@ -61,6 +71,14 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
             return False
         return True
 
+    def check(self, context) -> bool:
+        """With a File Format chosen, give the file name that format's ending; True when it changed."""
+        if self.file_format == "AUTO":
+            return False
+        path = splat_stem(self.filepath) + FORMATS[self.file_format].extensions[0]
+        changed, self.filepath = path != self.filepath, path
+        return changed
+
     def invoke(self, context, event):
         if not self.filepath:
             obj = export_target(context)
@@ -75,16 +93,21 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
             return {"CANCELLED"}
         try:
             from ..core.errors import GT2GSError
+            from ..core.scene.files import output_format, write_splats
             from ..core.scene.ply_write import write_ply
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}
 
-        fmt = FORMATS[self.ply_format] or splats.get_meta(obj.data).get("format") or "binary_little_endian"
+        encoding = ENCODINGS[self.ply_format] or splats.get_meta(obj.data).get("format") or "binary_little_endian"
         path = bpy.path.abspath(self.filepath)
         try:
+            fmt = output_format(path, None if self.file_format == "AUTO" else self.file_format)
             scene, notes = splats.object_to_scene(obj, bake_transform=self.bake_transform)
-            write_ply(path, scene, fmt=fmt)
+            if fmt == PLY:
+                write_ply(path, scene, fmt=encoding)
+            else:
+                notes += write_splats(path, scene, fmt)
         except (GT2GSError, splats.SplatObjectError, ValueError) as exc:
             self.report({"ERROR"}, str(exc))
             return {"CANCELLED"}
@@ -97,8 +120,14 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
         return {"FINISHED"}
 
 
+def splat_stem(path: str) -> str:
+    """A file path without its splat-format ending (``.compressed.ply`` whole)."""
+    endings = sorted((ext for fmt in WRITERS for ext in FORMATS[fmt].extensions), key=len, reverse=True)
+    return next((path[: -len(ext)] for ext in endings if path.lower().endswith(ext)), path)
+
+
 def menu_func_export(self, context):
-    self.layout.operator(GT2GS_OT_export_ply.bl_idname, text="Gaussian Splat (.ply)")
+    self.layout.operator(GT2GS_OT_export_ply.bl_idname, text="Gaussian Splat (.ply, .spz, .splat)")
 
 
 _registration = ClassesWithMenu((GT2GS_OT_export_ply,), "TOPBAR_MT_file_export", menu_func_export)

@@ -1,4 +1,5 @@
-"""File ▸ Import ▸ Gaussian Splat (.ply), and drag-and-drop of .ply files into the 3D viewport."""
+"""File ▸ Import ▸ Gaussian Splat, and drag-and-drop of splat files (PLY, compressed PLY, SOG, SPZ, .splat) into
+the 3D viewport."""
 
 from __future__ import annotations
 
@@ -11,6 +12,11 @@ from bpy_extras.io_utils import ImportHelper
 
 from ..blender import splats
 from ..blender.registration import ClassesWithMenu
+from ..core.scene.files import READ_EXTENSIONS, SOG_META
+
+IMPORT_GLOB = ";".join(f"*{ext}" for ext in READ_EXTENSIONS) + f";{SOG_META}"
+"""What the file browser offers (compressed PLYs are .ply files; an unpacked SOG folder is imported through
+its meta.json)."""
 
 
 def engine_missing_message(exc: ImportError) -> str:
@@ -22,14 +28,14 @@ def engine_missing_message(exc: ImportError) -> str:
 
 
 class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
-    """Import 3D Gaussian Splatting .ply files as point-cloud objects, every PLY property as an attribute"""
+    """Import Gaussian splat files (PLY, compressed PLY, SOG, SPZ, .splat) as point-cloud objects"""
 
     bl_idname = "gt2gs.import_ply"
     bl_label = "Import Gaussian Splat"
     bl_options = {"REGISTER", "UNDO"}
 
     filename_ext = ".ply"
-    filter_glob: StringProperty(default="*.ply", options={"HIDDEN"})
+    filter_glob: StringProperty(default=IMPORT_GLOB, options={"HIDDEN"})
     directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
     files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
 
@@ -54,8 +60,6 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             return {"CANCELLED"}
         try:
             from ..core.errors import GT2GSError
-            from ..core.scene.ply import read_ply_arrays
-            from ..core.scene.ply_header import read_ply_header
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}
@@ -75,10 +79,9 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
 
         try:
             for path in paths:
-                header = read_ply_header(path)
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always")
-                    scene = read_ply_arrays(path, drop_invalid=self.drop_invalid)
+                    scene, encoding = read_any(path, self.drop_invalid)
                 notes.extend(str(w.message) for w in caught)
                 created.append(
                     splats.scene_to_object(
@@ -86,7 +89,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
                         object_name_for(path),
                         collection,
                         source_path=path,
-                        source_format=header.format,
+                        source_format=encoding,
                         with_material=self.add_material,
                     )
                 )
@@ -124,25 +127,39 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
 
 
 class GT2GS_FH_ply(bpy.types.FileHandler):
-    """Drop .ply files on the 3D viewport to import them as Gaussian splats."""
+    """Drop splat files on the 3D viewport to import them as Gaussian splats."""
 
     bl_idname = "GT2GS_FH_ply"
     bl_label = "Gaussian Splat"
     bl_import_operator = GT2GS_OT_import_ply.bl_idname
-    bl_file_extensions = ".ply"
+    bl_file_extensions = ";".join(READ_EXTENSIONS)
 
     @classmethod
     def poll_drop(cls, context):
         return context.area is not None and context.area.type == "VIEW_3D"
 
 
+def read_any(path: str, drop_invalid: bool):
+    """A splat file's arrays, and its PLY encoding (None for the other formats); SOG images are decoded by
+    Blender, so import needs numpy only."""
+    from ..blender.webp import decode_webp
+    from ..core.scene.files import PLY, SOG, detect_format, read_splats
+    from ..core.scene.ply_header import read_ply_header
+
+    fmt = detect_format(path)
+    options = {"decode_webp": decode_webp} if fmt == SOG else {}
+    encoding = read_ply_header(path).format if fmt == PLY else None
+    return read_splats(path, drop_invalid=drop_invalid, **options), encoding
+
+
 def object_name_for(path: str) -> str:
-    """The file's name, or for the trainers' generic ``point_cloud.ply`` the scene folder's name.
+    """The file's name, or for a generic ``point_cloud.ply`` (the trainers') or ``meta.json`` (an unpacked
+    SOG) the scene folder's name.
 
     ``.../garden/point_cloud/iteration_30000/point_cloud.ply`` -> ``garden``.
     """
-    stem = bpy.path.display_name_from_filepath(path)
-    if stem.lower() != "point_cloud":
+    stem = bpy.path.display_name_from_filepath(path).removesuffix(".compressed")
+    if stem.lower() not in ("point_cloud", "meta"):
         return stem or "Gaussian Splat"
     parts = os.path.normpath(os.path.abspath(path)).split(os.sep)[:-1]
     for part in reversed(parts):
@@ -169,7 +186,7 @@ def _remove_objects(objects: list) -> None:
 
 
 def menu_func_import(self, context):
-    self.layout.operator(GT2GS_OT_import_ply.bl_idname, text="Gaussian Splat (.ply)")
+    self.layout.operator(GT2GS_OT_import_ply.bl_idname, text="Gaussian Splat (.ply, .spz, .sog, .splat)")
 
 
 _registration = ClassesWithMenu((GT2GS_OT_import_ply, GT2GS_FH_ply), "TOPBAR_MT_file_import", menu_func_import)

@@ -583,7 +583,7 @@ def test_register_and_unregister_twice(fresh, extension, donut):
 def test_file_handler_accepts_ply_drops_on_the_3d_view(fresh):
     handler = bpy.types.GT2GS_FH_ply
     assert handler.bl_import_operator == "gt2gs.import_ply"
-    assert handler.bl_file_extensions == ".ply"
+    assert ".ply" in handler.bl_file_extensions.split(";")
     assert handler.poll_drop(SimpleNamespace(area=SimpleNamespace(type="VIEW_3D")))
     assert not handler.poll_drop(SimpleNamespace(area=SimpleNamespace(type="IMAGE_EDITOR")))
     assert not handler.poll_drop(SimpleNamespace(area=None))

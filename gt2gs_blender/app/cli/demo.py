@@ -13,8 +13,8 @@ import numpy as np
 import torch
 
 from ...core.features.weights import ENV_VAR
+from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
-from ...core.scene.ply import read_ply
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
@@ -29,7 +29,8 @@ DEMO_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
 SHARED_WEIGHTS = SHARED / "weights"
 
 
-def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
+def add_demo_command(commands: Any, debug: argparse.ArgumentParser) -> None:
+    """The ``demo`` subcommand."""
     p = commands.add_parser(
         "demo",
         parents=[debug, scene_options(), render_options()],
@@ -41,7 +42,7 @@ def _add_demo(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--out", type=Path, default=Path("out/demo"), metavar="DIR", help="output folder (default: out/demo)"
     )
-    p.add_argument("--scene", type=Path, metavar="SCENE.ply", help="use this scene instead of the donut")
+    p.add_argument("--scene", type=Path, metavar="SCENE", help="use this scene instead of the donut")
     p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
     p.add_argument(
         "--views",
@@ -91,9 +92,9 @@ def stripes_texture(size: int = 256, period: int = 24) -> np.ndarray:
 def _demo_scene(path: Path | None, drop_invalid: bool) -> tuple[GaussianScene, str]:
     """The scene to show: the given file, else the shared donut, else a generated torus."""
     if path is not None:
-        return read_ply(path, drop_invalid=drop_invalid), str(path)
+        return read_scene(path, drop_invalid=drop_invalid), str(path)
     if SHARED_DONUT.is_file():
-        return read_ply(SHARED_DONUT, drop_invalid=drop_invalid), str(SHARED_DONUT)
+        return read_scene(SHARED_DONUT, drop_invalid=drop_invalid), str(SHARED_DONUT)
     return torus_scene(), f"a generated torus (the shared donut is not at {SHARED_DONUT})"
 
 

@@ -11,7 +11,8 @@ from ..progress import TerminalProgress
 from .args import positive_int, render_options
 
 
-def _add_fit(commands: Any, debug: argparse.ArgumentParser) -> None:
+def add_fit_command(commands: Any, debug: argparse.ArgumentParser) -> None:
+    """The ``fit`` subcommand."""
     p = commands.add_parser(
         "fit",
         parents=[debug, render_options(background=(0.0, 0.0, 0.0), device=False)],

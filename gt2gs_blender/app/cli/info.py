@@ -8,9 +8,9 @@ import re
 from pathlib import Path
 from typing import Any
 
+from ...core.scene.files import COMPRESSED_PLY, FORMATS, PLY, detect_format, read_scene
 from ...core.scene.gaussians import GaussianScene
 from ...core.scene.inria import NORMAL_NAMES
-from ...core.scene.ply import read_ply
 from ...core.scene.ply_header import read_ply_header
 from .args import scene_options
 
@@ -18,14 +18,16 @@ ROBUST_QUANTILE = 0.98
 """Robust bounds ignore the 2 % most extreme means on each side of each axis (as auto_views does)."""
 
 
-def _add_info(commands: Any, debug: argparse.ArgumentParser) -> None:
+def add_info_command(commands: Any, debug: argparse.ArgumentParser) -> None:
+    """The ``info`` subcommand."""
     p = commands.add_parser(
         "info",
         parents=[debug, scene_options()],
-        help="count, SH degree, bounds and properties of a 3DGS .ply",
-        description="Describe a 3D Gaussian Splatting .ply file.",
+        help="format, count, SH degree, bounds and properties of a splat file",
+        description="Describe a 3D Gaussian Splatting file (PLY, compressed PLY, SOG, SPZ or .splat) and what its "
+        "format keeps.",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE.ply")
+    p.add_argument("scene", type=Path, metavar="SCENE")
     p.add_argument("--json", action="store_true", help="print the description as JSON")
     p.set_defaults(run=cmd_info)
 
@@ -37,24 +39,36 @@ def cmd_info(args: argparse.Namespace) -> None:
 
 
 def scene_info(path: Path, *, drop_invalid: bool = False) -> dict[str, Any]:
-    """A JSON-ready description of a 3DGS PLY: header facts plus statistics of the loaded scene."""
-    header = read_ply_header(path)
-    scene = read_ply(path, drop_invalid=drop_invalid)
+    """A JSON-ready description of a splat file: its format and what that keeps, header facts (PLY files),
+    and statistics of the loaded scene."""
+    fmt = detect_format(path)
+    header = read_ply_header(path) if fmt in (PLY, COMPRESSED_PLY) else None
+    scene = read_scene(path, drop_invalid=drop_invalid)
     return {
         "path": str(path),
-        "file_size": path.stat().st_size,
-        "format": header.format,
+        "file_size": _size(path),
+        "format": fmt,
+        "format_name": FORMATS[fmt].label,
+        "encoding": None if header is None else header.format,
+        "keeps": FORMATS[fmt].keeps,
         "count": len(scene),
         "sh_degree": scene.sh_degree,
         "normals": all(name in scene.extras for name in NORMAL_NAMES),
         "bounds": _bounds(scene, 1.0),
         "robust_bounds": _bounds(scene, ROBUST_QUANTILE),
         "robust_quantile": ROBUST_QUANTILE,
-        "properties": [{"name": name, "type": ply_type} for name, ply_type in header.properties],
+        "properties": [] if header is None else [{"name": n, "type": t} for n, t in header.properties],
         "extras": list(scene.extras),
-        "other_elements": [{"name": e.name, "count": e.count} for e in header.elements if e.name != "vertex"],
-        "comments": list(header.comments),
+        "other_elements": []
+        if header is None
+        else [{"name": e.name, "count": e.count} for e in header.elements if e.name != "vertex"],
+        "comments": [] if header is None else list(header.comments),
     }
+
+
+def _size(path: Path) -> int:
+    """Bytes of a file, or of all files in a folder (an unpacked SOG scene)."""
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file()) if path.is_dir() else path.stat().st_size
 
 
 def _bounds(scene: GaussianScene, quantile: float) -> dict[str, list[float]] | None:
@@ -68,18 +82,28 @@ def _format_info(info: dict[str, Any]) -> str:
     """The human-readable form of :func:`scene_info`."""
     percent = round(100 * (1 - info["robust_quantile"]))
     rows = [
-        ("format", f"{info['format']}, {info['file_size'] / 2**20:.1f} MiB"),
+        ("format", f"{info['format_name']}{_encoding(info)}, {info['file_size'] / 2**20:.1f} MiB"),
+        ("keeps", info["keeps"]),
         ("gaussians", f"{info['count']:,}"),
         ("SH degree", str(info["sh_degree"])),
         ("normals", "yes" if info["normals"] else "no"),
         ("bounds", _format_bounds(info["bounds"])),
         (f"robust {percent}-{100 - percent}%", _format_bounds(info["robust_bounds"])),
-        ("properties", f"{len(info['properties'])}: {_compact_properties(info['properties'])}"),
+        *(
+            [("properties", f"{len(info['properties'])}: {_compact_properties(info['properties'])}")]
+            if info["properties"]
+            else []
+        ),
         ("extras", " ".join(info["extras"]) or "none"),
     ]
     rows += [("element", f"{e['name']} ({e['count']:,}, skipped)") for e in info["other_elements"]]
     rows += [("comment", c) for c in info["comments"]]
     return "\n".join([info["path"], *(f"  {key:<14}{value}" for key, value in rows)])
+
+
+def _encoding(info: dict[str, Any]) -> str:
+    """`` (binary_little_endian)`` for PLY files, else nothing."""
+    return "" if info["encoding"] is None else f" ({info['encoding']})"
 
 
 def _format_bounds(bounds: dict[str, list[float]] | None) -> str:

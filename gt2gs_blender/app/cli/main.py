@@ -1,4 +1,5 @@
-"""The command line, ``python -m gt2gs_blender``: inspect a 3DGS PLY, render it, run the demo, fit one.
+"""The command line, ``python -m gt2gs_blender``: inspect, render, convert and re-texture splat files, run the
+demo, fit one.
 
 Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line on stderr
 and exit with 2; any other exception is a bug, also reported in one line, with exit code 1; ``--debug`` adds
@@ -17,10 +18,11 @@ from collections.abc import Iterator, Sequence
 
 from ...core.errors import GT2GSError, out_of_memory_message
 from . import transfer as transfer_cmd
-from .demo import _add_demo
-from .fit import _add_fit
-from .info import _add_info
-from .render import _add_render
+from .convert import add_convert_command
+from .demo import add_demo_command
+from .fit import add_fit_command
+from .info import add_info_command
+from .render import add_render_command
 
 PROG = "gt2gs"
 
@@ -62,11 +64,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--debug", action="store_true", help="print the traceback of errors")
     commands = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
-    _add_info(commands, debug)
-    _add_render(commands, debug)
-    _add_demo(commands, debug)
-    _add_fit(commands, debug)
+    add_info_command(commands, debug)
+    add_render_command(commands, debug)
+    add_demo_command(commands, debug)
+    add_fit_command(commands, debug)
     transfer_cmd.add_transfer_command(commands, debug)
+    add_convert_command(commands, debug)
     return parser
 
 

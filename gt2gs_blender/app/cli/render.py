@@ -21,8 +21,8 @@ from ...core.device import resolve_device
 from ...core.errors import GT2GSError
 from ...core.progress import Progress
 from ...core.render import render, resolve_backend
+from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
-from ...core.scene.ply import read_ply
 from ..images import write_png
 from ..progress import TerminalProgress
 from .args import positive_float, positive_int, render_options, scene_options, up
@@ -35,7 +35,8 @@ DEPTH_MIN_ALPHA = 0.1
 """Pixels less opaque than this have no meaningful depth; they are 0 in depth PNGs."""
 
 
-def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
+def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
+    """The ``render`` subcommand."""
     p = commands.add_parser(
         "render",
         parents=[debug, scene_options(), render_options()],
@@ -43,7 +44,7 @@ def _add_render(commands: Any, debug: argparse.ArgumentParser) -> None:
         description="Render a scene to DIR/view_000.png, ... and write the cameras used to DIR/cameras.json. "
         "Without --cameras, N views on a ring fitted to the scene are generated.",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE.ply")
+    p.add_argument("scene", type=Path, metavar="SCENE")
     p.add_argument("-o", "--output", type=Path, required=True, metavar="DIR", help="output folder")
     source = p.add_mutually_exclusive_group()
     source.add_argument(
@@ -87,7 +88,7 @@ class RenderReport:
 
 def cmd_render(args: argparse.Namespace) -> None:
     """Render a scene from given or generated cameras into a folder of PNGs."""
-    scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
+    scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
     cameras = _cameras(args, scene)
     report = render_to_dir(
         scene,

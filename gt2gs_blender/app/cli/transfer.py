@@ -9,7 +9,7 @@ from typing import Any
 from ...core.cameras.camera import Camera
 from ...core.cameras.files import load_views
 from ...core.cameras.llff import load_llff
-from ...core.scene.ply import read_ply
+from ...core.scene.files import read_scene
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
 from .args import render_options, scene_options
@@ -45,7 +45,7 @@ def _views_source(args: argparse.Namespace) -> str | None:
 
 def cmd_transfer(args: argparse.Namespace) -> None:
     """Re-texture a scene, write the stylised PLY (and report, strip), print a summary."""
-    scene = read_ply(args.scene, drop_invalid=args.drop_invalid)
+    scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
     texture = read_texture(args.texture)  # inputs are checked before any work starts
     region = load_region(args.region, len(scene)) if args.region is not None else None
     views, config = _views(args), config_from_args(args)
@@ -80,9 +80,16 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
         "writes the stylised scene to OUT.ply.",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE.ply")
+    p.add_argument("scene", type=Path, metavar="SCENE")
     p.add_argument("texture", type=Path, metavar="TEXTURE")
-    p.add_argument("-o", "--output", type=Path, required=True, metavar="OUT.ply", help="the stylised scene")
+    p.add_argument(
+        "-o",
+        "--output",
+        type=Path,
+        required=True,
+        metavar="OUT",
+        help="the stylised scene: .ply, .compressed.ply, .spz or .splat",
+    )
     add_view_arguments(p)
     add_setting_arguments(p, given=GIVEN)
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")

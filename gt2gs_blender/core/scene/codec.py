@@ -64,6 +64,28 @@ def canonical_quats(quats: np.ndarray) -> np.ndarray:
     return np.where(unit[..., :1] < 0.0, -unit, unit)
 
 
+KEPT = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+"""For each index of a largest component, the indices of the other three, in order."""
+
+
+def smallest_three(components: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each unit quaternion's "smallest three": the index of its largest |component| and the other three, in
+    order, signed so that the left-out largest is positive (the formats store these and rebuild it)."""
+    rows = np.arange(len(components))
+    largest = np.argmax(np.abs(components), axis=1)
+    signed = components * np.where(components[rows, largest] < 0.0, -1.0, 1.0)[:, None]
+    return largest, np.take_along_axis(signed, KEPT[largest], axis=1)
+
+
+def from_smallest_three(largest: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Quaternion components from the largest one's index and the other three (see :func:`smallest_three`),
+    the largest rebuilt, positive, from the unit norm."""
+    components = np.zeros((len(others), 4))
+    np.put_along_axis(components, KEPT[largest], others, axis=1)
+    components[np.arange(len(others)), largest] = np.sqrt(np.maximum(0.0, 1.0 - np.sum(others * others, axis=1)))
+    return components
+
+
 def as_arrays(scene: GaussianScene | SplatArrays) -> SplatArrays:
     """A scene as numpy arrays (a ``GaussianScene``'s tensors are copied to the CPU)."""
     if isinstance(scene, SplatArrays):
@@ -128,7 +150,7 @@ def gunzip(path: PathLike, data: bytes, limit: int = MAX_DECOMPRESSED) -> bytes:
     except (OSError, EOFError, zlib.error) as exc:
         raise SplatFormatError(path, f"the gzip stream is corrupt or truncated ({exc})") from None
     if len(out) > limit:
-        raise SplatFormatError(path, f"decompresses to more than {limit / 2**30:.0f} GiB: not a splat file")
+        raise SplatFormatError(path, f"decompresses to more than {limit / 2**20:,.0f} MiB: not a splat file")
     return out
 
 

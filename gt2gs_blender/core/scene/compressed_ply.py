@@ -46,10 +46,12 @@ from .codec import (
     colour_from_dc,
     dc_from_colour,
     dropped_notes,
+    from_smallest_three,
     logit,
     make_arrays,
     read_bytes,
     sigmoid,
+    smallest_three,
 )
 from .inria import REST_PREFIX, rest_per_channel, tensor_view
 from .ply import SplatArrays
@@ -235,13 +237,7 @@ def _unpack_rotation(words: np.ndarray) -> np.ndarray:
     """(N, 4) quaternions (w, x, y, z) from smallest-three words."""
     words = words.astype(np.uint32)
     small = np.stack([(_unpack_unorm(words, shift, 10) - 0.5) / ROTATION_LIMIT for shift in (20, 10, 0)], 1)
-    largest = (words >> np.uint32(30)).astype(np.intp)
-    rebuilt = np.sqrt(np.maximum(0.0, 1.0 - np.sum(small * small, axis=1)))
-    quats = np.empty((len(words), 4))
-    for component in range(4):
-        source = np.clip(component - (component > largest), 0, 2)
-        quats[:, component] = np.where(component == largest, rebuilt, small[np.arange(len(words)), source])
-    return quats
+    return from_smallest_three((words >> np.uint32(30)).astype(np.intp), small)
 
 
 def _unpack_sh(records: np.ndarray | None, n: int) -> np.ndarray:
@@ -335,10 +331,7 @@ def _pack_8888(r: np.ndarray, g: np.ndarray, b: np.ndarray, a: np.ndarray) -> np
 
 def _pack_rotation(quats: np.ndarray) -> np.ndarray:
     """(N, 4) quaternions (w, x, y, z) as smallest-three words: the largest's index and three 10-bit components."""
-    q = canonical_quats(quats)
-    largest = np.argmax(np.abs(q), axis=1)
-    q = q * np.where(q[np.arange(len(q)), largest] < 0.0, -1.0, 1.0)[:, None]
-    others = q[np.arange(4)[None, :] != largest[:, None]].reshape(len(q), 3)
+    largest, others = smallest_three(canonical_quats(quats))
     fields = _pack_unorm(others * ROTATION_LIMIT + 0.5, 10)
     word = largest.astype(np.uint32) << np.uint32(30)
     return word | (fields[:, 0] << np.uint32(20)) | (fields[:, 1] << np.uint32(10)) | fields[:, 2]

@@ -43,7 +43,7 @@ import numpy as np
 
 from ..errors import SplatFormatError
 from . import codec
-from .codec import PathLike, canonical_quats, logit, make_arrays, read_bytes
+from .codec import PathLike, canonical_quats, from_smallest_three, logit, make_arrays, read_bytes
 from .ply import SplatArrays
 
 WebpDecoder = Callable[[bytes, str], "np.ndarray | None"]
@@ -58,7 +58,6 @@ SH_COEFFS = {1: 3, 2: 8, 3: 15}
 """Coefficients per colour channel beyond the DC term, by SH degree (``shN.bands``)."""
 QUAT_TAG = 252
 """Alpha of a ``quats`` pixel: QUAT_TAG + the index (w, x, y, z) of the dropped largest component."""
-_QUAT_KEPT = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 """The components R, G, B hold, by dropped component."""
 
 
@@ -284,15 +283,10 @@ def _decode_means(low: np.ndarray, high: np.ndarray, section: dict[str, Any]) ->
 
 def _decode_quats(pixels: np.ndarray) -> np.ndarray:
     """Unit quaternions (w, x, y, z), w >= 0, from smallest-three pixels; a bad tag decodes as the identity."""
-    n = len(pixels)
     small = (pixels[:, :3] / 255.0 * 2.0 - 1.0) / math.sqrt(2.0)
     dropped = pixels[:, 3].astype(np.int64) - QUAT_TAG
     valid = (dropped >= 0) & (dropped <= 3)
-    dropped = np.where(valid, dropped, 0)
-    quats = np.zeros((n, 4))
-    rows = np.arange(n)[:, None]
-    quats[rows, _QUAT_KEPT[dropped]] = small
-    quats[np.arange(n), dropped] = np.sqrt(np.maximum(0.0, 1.0 - np.sum(small * small, axis=1)))
+    quats = from_smallest_three(np.where(valid, dropped, 0), small)
     quats[~valid] = (1.0, 0.0, 0.0, 0.0)
     return canonical_quats(quats)
 

@@ -56,11 +56,13 @@ from .codec import (
     as_arrays,
     canonical_quats,
     dropped_notes,
+    from_smallest_three,
     gunzip,
     logit,
     make_arrays,
     read_bytes,
     sigmoid,
+    smallest_three,
 )
 from .inria import sh_degree_from_rest
 from .ply import SplatArrays
@@ -70,7 +72,7 @@ if TYPE_CHECKING:
 
 MAGIC = 0x5053474E
 """``NGSP`` read as a little-endian u32."""
-_MAGIC_BYTES = MAGIC.to_bytes(4, "little")
+MAGIC_BYTES = MAGIC.to_bytes(4, "little")
 GZIP_VERSIONS = (2, 3)
 """The versions written (one gzip stream); version 4 (zstd) is read only."""
 ZSTD_VERSION = 4
@@ -92,7 +94,6 @@ MAX_FRACTIONAL_BITS = 30
 """Readers compute 1 << F in 32-bit integers."""
 _INT24_MAX = 2**23 - 1
 _SQRT_HALF = np.sqrt(0.5)
-_OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
 """The three components a v3 rotation stores, in order, for each index of the dropped largest one."""
 _GZIP = b"\x1f\x8b"
 
@@ -110,7 +111,7 @@ def read_spz(path: PathLike, *, drop_invalid: bool = False) -> SplatArrays:
     data = read_bytes(path)
     if data[:2] == _GZIP:
         header, blocks = _gzip_blocks(path, data)
-    elif data[:4] == _MAGIC_BYTES:
+    elif data[:4] == MAGIC_BYTES:
         header, blocks = _zstd_blocks(path, data)
     else:
         raise SplatFormatError(path, "not an spz file (neither a gzip stream nor an NGSP header)")
@@ -253,16 +254,11 @@ def _decode_rotations_v2(raw: np.ndarray) -> np.ndarray:
 
 
 def _decode_rotations_v3(raw: np.ndarray) -> np.ndarray:
-    """(N, 4) w, x, y, z from version 3's smallest-three u32s."""
+    """(N, 4) w, x, y, z from version 3's smallest-three u32s (components stored in x, y, z, w order)."""
     packed = raw.view("<u4").astype(np.int64)
-    largest = packed >> 30
-    shifts = np.array([20, 10, 0])
-    fields = (packed[:, None] >> shifts) & 0x3FF
+    fields = (packed[:, None] >> np.array([20, 10, 0])) & 0x3FF
     values = _SQRT_HALF * (fields & 0x1FF) / 511.0 * np.where(fields & 0x200, -1.0, 1.0)
-    xyzw = np.zeros((len(packed), 4))
-    np.put_along_axis(xyzw, _OTHERS[largest], values, axis=1)
-    xyzw[np.arange(len(packed)), largest] = np.sqrt(np.maximum(0.0, 1.0 - np.sum(values * values, axis=1)))
-    return xyzw[:, [3, 0, 1, 2]]
+    return from_smallest_three(packed >> 30, values)[:, [3, 0, 1, 2]]
 
 
 def write_spz(
@@ -381,12 +377,8 @@ def _encode_rotations_v2(quats: np.ndarray) -> np.ndarray:
 
 
 def _encode_rotations_v3(quats: np.ndarray) -> np.ndarray:
-    """(N,) little-endian u32s: the smallest three components and the largest one's index."""
-    xyzw = canonical_quats(quats)[:, [1, 2, 3, 0]]
-    largest = np.argmax(np.abs(xyzw), axis=1)
-    rows = np.arange(len(xyzw))
-    xyzw *= np.where(xyzw[rows, largest] < 0.0, -1.0, 1.0)[:, None]
-    others = np.take_along_axis(xyzw, _OTHERS[largest], axis=1)
+    """(N,) little-endian u32s: the smallest three components and the largest one's index (x, y, z, w order)."""
+    largest, others = smallest_three(canonical_quats(quats)[:, [1, 2, 3, 0]])
     magnitude = np.minimum(np.round(np.abs(others) / _SQRT_HALF * 511.0), 511).astype(np.int64)
     fields = magnitude | np.where(others < 0.0, 0x200, 0)
     packed = (largest.astype(np.int64) << 30) | (fields[:, 0] << 20) | (fields[:, 1] << 10) | fields[:, 2]
