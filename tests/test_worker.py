@@ -302,3 +302,9 @@ def test_dependency_status_sees_this_environment(tmp_path):
     assert set(status) == {"torch", "numpy", "cv2"}
     assert all(d.ok for d in status.values())
     assert status["numpy"].version == np.__version__
+
+
+def test_a_local_build_tag_is_the_tested_version():
+    assert deps.Dependency("torch", "torch", "2.13.0+cpu", "2.13.0").matches_pin
+    assert not deps.Dependency("torch", "torch", "2.12.1", "2.13.0").matches_pin
+    assert not deps.Dependency("torch", "torch", None, "2.13.0").matches_pin

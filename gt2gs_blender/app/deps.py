@@ -40,7 +40,13 @@ class Dependency:
 
     @property
     def ok(self) -> bool:
+        """Whether the package is installed at all."""
         return self.version is not None
+
+    @property
+    def matches_pin(self) -> bool:
+        """Whether the installed version is the tested one (a local build tag such as ``+cpu`` aside)."""
+        return self.version is not None and self.version.split("+")[0] == self.pinned
 
 
 def search_path(deps_dir: str | os.PathLike | None) -> list[str]:

@@ -112,9 +112,12 @@ def texture_spec(context, job: Job, override: str | None) -> str:
     """The job's texture: a file on disk, or an image datablock's pixels saved as .npy in the job folder."""
     settings = context.scene.gt2gs
     if override or settings.texture_source == "FILE":
-        path = os.path.abspath(bpy.path.abspath(override or settings.texture_path))
+        chosen = override or settings.texture_path
+        if not chosen:
+            raise RunError("choose a texture file (or an image) first")
+        path = os.path.abspath(bpy.path.abspath(chosen))
         if not os.path.isfile(path):
-            raise RunError(f"texture file not found: {path or '(none chosen)'}")
+            raise RunError(f"texture file not found: {path}")
         return path
     image = settings.texture_image
     if image is None:

@@ -23,6 +23,10 @@ class PlyFormatError(InputFileError):
     """A PLY file is malformed or is not a 3D Gaussian Splatting file."""
 
 
+class NotGaussianPlyError(PlyFormatError):
+    """A valid PLY that holds no Gaussians: a mesh or a plain point cloud."""
+
+
 class SplatFormatError(InputFileError):
     """A splat file (compressed PLY, SOG, SPZ, .splat) is malformed, truncated or of an unknown version."""
 

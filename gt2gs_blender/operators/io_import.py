@@ -10,7 +10,7 @@ import bpy
 from bpy.props import BoolProperty, CollectionProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper
 
-from ..blender import splats
+from ..blender import display, splats
 from ..blender.registration import ClassesWithMenu
 from ..core.scene.files import READ_EXTENSIONS, SOG_META
 
@@ -50,6 +50,12 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
         default=True,
     )
 
+    setup_scene: BoolProperty(
+        name="Set Up Scene",
+        description="Set the Standard view transform and the Cycles/EEVEE settings the splat display needs",
+        default=False,
+    )
+
     def invoke(self, context, event):
         return self.invoke_popup(context)  # a confirmation for drag-and-drop, else the file browser
 
@@ -59,7 +65,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             self.report({"ERROR"}, "No file to import")
             return {"CANCELLED"}
         try:
-            from ..core.errors import GT2GSError
+            from ..core.errors import GT2GSError, NotGaussianPlyError
         except ImportError as exc:
             self.report({"ERROR"}, engine_missing_message(exc))
             return {"CANCELLED"}
@@ -93,6 +99,10 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
                         with_material=self.add_material,
                     )
                 )
+        except NotGaussianPlyError as exc:
+            undo_partial_import()
+            self.report({"ERROR"}, f"{exc}; import it with File ▸ Import ▸ Stanford PLY (.ply)")
+            return {"CANCELLED"}
         except (GT2GSError, splats.SplatObjectError) as exc:
             undo_partial_import()
             self.report({"ERROR"}, str(exc))
@@ -106,6 +116,8 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             undo_partial_import()
             raise
 
+        if self.setup_scene:
+            display.setup_scene(context.scene)
         for obj in context.view_layer.objects.selected:
             obj.select_set(False)
         for obj in created:

@@ -104,7 +104,7 @@ class GT2GS_OT_transfer_texture(RunOverrides, bpy.types.Operator):
 
     bl_idname = "gt2gs.transfer_texture"
     bl_label = "Transfer Texture"
-    bl_options = {"REGISTER", "UNDO"}
+    bl_options = {"UNDO"}  # not REGISTER: the redo panel would run the whole job again, synchronously
 
     _run: transfer_run.TransferRun | None = None
     _timer = None

@@ -17,7 +17,7 @@ def dependency_rows(deps_dir: str | None) -> list[tuple[str, str, bool]]:
     rows = []
     for dep in deps.dependency_status(deps_dir):
         found = f"{dep.version}" if dep.ok else "missing"
-        if dep.ok and dep.version != dep.pinned:
+        if dep.ok and not dep.matches_pin:
             found += f" (tested: {dep.pinned})"
         rows.append((dep.module, found, dep.ok))
     return rows

@@ -60,14 +60,14 @@ def progress_text(status: JobStatus) -> str:
     return " · ".join(parts)
 
 
-def report_rows(report: dict[str, Any] | None, result: str | None) -> list[tuple[str, str]]:
-    """(label, value) rows summarising a run's report."""
+def report_rows(report: dict[str, Any] | None, result: str | None, seconds: float = 0.0) -> list[tuple[str, str]]:
+    """(label, value) rows summarising a run's report; ``seconds``: what the user waited, worker start included."""
     if not report:
         return [("Result", result)] if result else []
     width, height = report.get("image_size") or ("?", "?")
     rows = [
         ("Result", result or "-"),
-        ("Time", f"{report.get('seconds', 0.0):.1f} s"),
+        ("Time", f"{seconds:.0f} s (texture transfer {report.get('seconds', 0.0):.0f} s)"),
         ("Splats", f"{report.get('n_gaussians', 0):,}"),
         ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
         ("Device", str(report.get("device", "?"))),
@@ -92,9 +92,9 @@ def transfer_view(target: str | None, running: JobStatus | None, last: transfer_
     if last is None:
         message = f"Ready: {target}" if can else "Select a Gaussian splat object"
         return TransferView(IDLE, can, False, message, ICONS[IDLE])
-    rows = report_rows(last.report, last.result) if last.state == DONE else []
+    rows = report_rows(last.report, last.result, last.seconds) if last.state == DONE else []
     message = {
-        DONE: f"Done: {last.message}",
+        DONE: last.message[:1].upper() + last.message[1:],
         CANCELLED: "Cancelled; the scene is unchanged",
         ERROR: f"Failed: {last.message}",
     }.get(last.state, last.message)

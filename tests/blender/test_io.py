@@ -514,7 +514,7 @@ def truncated_copy(donut: Path, tmp_path: Path) -> Path:
         ("garbage", "not a PLY file"),
         ("empty", "empty"),
         ("truncated", "truncated"),
-        ("not_gaussian", "missing required properties"),
+        ("not_gaussian", "missing required properties.*import it with File ▸ Import ▸ Stanford PLY"),
         ("missing", "no such file"),
         ("directory", "is a directory"),
     ],

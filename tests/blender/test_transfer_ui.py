@@ -78,6 +78,14 @@ def same(a: dict, b: dict) -> bool:
     return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
 
 
+@pytest.fixture(autouse=True)
+def private_temp(tmp_path, monkeypatch):
+    """Jobs of this test in a folder of its own, so other runs on the machine cannot change what it counts."""
+    folder = tmp_path / "tmp"
+    folder.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(folder))
+
+
 def job_folders() -> set[str]:
     return set(glob.glob(os.path.join(tempfile.gettempdir(), "gt2gs_job_*")))
 
@@ -202,6 +210,9 @@ def test_unusable_texture_is_reported_and_nothing_starts(blob):
         bpy.ops.gt2gs.transfer_texture(texture_path="/nonexistent/wood.jpg")
     with pytest.raises(RuntimeError, match="unknown preset 'ultra'"):
         bpy.ops.gt2gs.transfer_texture(preset="ultra")
+    bpy.context.scene.gt2gs.texture_path = ""  # nothing chosen: say so, not "not found: <working folder>"
+    with pytest.raises(RuntimeError, match=r"choose a texture file \(or an image\) first"):
+        bpy.ops.gt2gs.transfer_texture()
     assert job_folders() == folders and not transfer_run.ACTIVE
 
 
@@ -324,9 +335,10 @@ def test_transfer_view_in_each_state():
         "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
         "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81},
     }
-    done = transfer_view("donut", None, transfer_run.Outcome(DONE, "done in 12 s", report, "donut GT²"))
+    done = transfer_view("donut", None, transfer_run.Outcome(DONE, "done in 15 s", report, "donut GT²", 15.2))
     rows = dict(done.report_rows)
-    assert done.state == DONE and done.message == "Done: done in 12 s" and done.progress is None
+    assert done.state == DONE and done.message == "Done in 15 s" and done.progress is None
+    assert rows["Time"] == "15 s (texture transfer 12 s)"  # the wait the user saw, beside the engine's part
     assert rows["Result"] == "donut GT²" and rows["Splats"] == "45,624" and rows["Views"] == "8 at 128×128"
     assert rows["Texture Match"] == "0.300 → 0.200" and rows["Features"] == "vgg19_norm_relu3"
     error = transfer_view("donut", None, transfer_run.Outcome(ERROR, "the worker process exited with status 1"))

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
 
-from ..errors import PlyFormatError
+from ..errors import NotGaussianPlyError, PlyFormatError
 
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
@@ -124,8 +124,10 @@ def _check_gaussian_layout(path: PathLike, header: PlyHeader) -> int:
     types = {p.name: p.type for p in props}
     missing = [name for name in REQUIRED if name not in types]
     if missing:
-        raise PlyFormatError(
-            path, f"missing required properties {', '.join(missing)} (not a 3D Gaussian Splatting PLY?)"
+        raise NotGaussianPlyError(
+            path,
+            f"missing required properties {', '.join(missing)}: a mesh or plain point cloud, not a 3D Gaussian "
+            "Splatting PLY",
         )
     rest = [p.name for p in props if p.name.startswith(REST_PREFIX)]
     k = rest_per_channel(rest)
