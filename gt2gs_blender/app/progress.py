@@ -13,7 +13,7 @@ from typing import TextIO
 
 from tqdm import tqdm
 
-from ..core.progress import Progress
+from ..core.progress import Progress, format_eta
 
 STEPS = 1000
 """The bar counts thousandths of the whole run (events carry a fraction, not a count)."""
@@ -64,9 +64,3 @@ class TerminalProgress:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def format_eta(seconds: float) -> str:
-    """``1:05`` for 65 seconds (minutes may exceed 59)."""
-    seconds = max(0, round(seconds))
-    return f"{seconds // 60}:{seconds % 60:02d}"

@@ -21,6 +21,7 @@ import bpy
 import bpy.utils.previews
 import numpy as np
 
+from ..core.progress import format_eta
 from ..core.transfer.config import IN_PREFERENCES, IN_SCENE
 from . import addon, properties, splats, views
 from .job import CANCELLED, DONE, ERROR, Job, JobStatus
@@ -29,6 +30,35 @@ SELECTION_ATTRIBUTE = ".selection"
 """The point selection of a point cloud's Edit Mode."""
 PREVIEW_KEY = "preview"
 RESULT_SUFFIX = " GT²"
+
+
+STAGE_NAMES = {
+    "starting": "Starting",
+    "prepare": "Preparing views",
+    "bank": "Texture bank",
+    "stylise": "Stylising",
+    "finish": "Finishing",
+}
+"""What the panel and headless runs call each stage of a run."""
+
+
+def eta_text(seconds: float | None) -> str:
+    """``ETA 1:05`` (empty while unknown)."""
+    if seconds is None:
+        return ""
+    return f"ETA {format_eta(seconds)}"
+
+
+def progress_text(status: JobStatus) -> str:
+    """``Stylising 12/40 · 45% · ETA 0:41``."""
+    parts = [STAGE_NAMES.get(status.stage, status.stage.title() or "Working")]
+    if status.total > 1:
+        parts[0] += f" {status.step}/{status.total}"
+    parts.append(f"{status.fraction:.0%}")
+    eta = eta_text(status.eta_s)
+    if eta:
+        parts.append(eta)
+    return " · ".join(parts)
 
 
 class RunError(Exception):

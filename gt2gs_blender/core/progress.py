@@ -40,6 +40,12 @@ class Progress:
 ProgressCallback = Callable[[Progress], None]
 
 
+def format_eta(seconds: float) -> str:
+    """``1:05`` for 65 seconds (minutes may exceed 59)."""
+    seconds = max(0, round(seconds))
+    return f"{seconds // 60}:{seconds % 60:02d}"
+
+
 @dataclass
 class Tracker:
     """Stage timing, progress fractions and cancellation for one run whose stages take ``weights``

@@ -15,11 +15,13 @@ import bpy
 from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ..blender import transfer_run
-from ..blender.job import DONE
+from ..blender.job import DONE, RUNNING
 from ..core.transfer.presets import PRESETS
 
 TIMER_S = 0.25
 HEADLESS_TICK_S = 0.1
+HEADLESS_STEP_PERCENT = 5
+"""Headless runs print a progress line at every stage and every 5 % of the run."""
 
 
 class RunOverrides:
@@ -90,6 +92,16 @@ def _start(op, context, kind: str) -> transfer_run.TransferRun | None:
         return None
 
 
+def _print_progress(status, shown: tuple | None) -> tuple | None:
+    """Print a progress line (stage, percent, time left) when the stage or the next 5 % is reached; what was shown."""
+    if status.state != RUNNING:
+        return shown
+    key = (status.stage, int(status.fraction * 100) // HEADLESS_STEP_PERCENT)
+    if key != shown:
+        print(f"gt2gs: {transfer_run.progress_text(status)}", flush=True)
+    return key
+
+
 def _end(op, run: transfer_run.TransferRun) -> set[str]:
     """Clean up, report the outcome, and the operator's return value for it."""
     outcome = run.finish()
@@ -123,8 +135,10 @@ class GT2GS_OT_transfer_texture(RunOverrides, bpy.types.Operator):
         run = _start(self, context, "transfer")
         if run is None:
             return {"CANCELLED"}
+        shown = None
         try:
-            while not run.tick(context).finished:
+            while not (status := run.tick(context)).finished:
+                shown = _print_progress(status, shown)
                 time.sleep(HEADLESS_TICK_S)
         except BaseException:  # Ctrl+C or a bug: stop the worker and remove its files before passing it on
             run.cancel()

@@ -13,16 +13,10 @@ import bpy
 
 from ..blender import transfer_run
 from ..blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from ..blender.transfer_run import progress_text
 from ..core.transfer.config import IN_SCENE, PARTS, user_settings
 from .sidebar import CATEGORY
 
-STAGE_NAMES = {
-    "starting": "Starting",
-    "prepare": "Preparing views",
-    "bank": "Texture bank",
-    "stylise": "Stylising",
-    "finish": "Finishing",
-}
 ICONS = {IDLE: "INFO", RUNNING: "TIME", DONE: "CHECKMARK", ERROR: "ERROR", CANCELLED: "CANCEL"}
 
 
@@ -38,26 +32,6 @@ class TransferView:
     progress: float | None = None
     progress_text: str = ""
     report_rows: list[tuple[str, str]] = field(default_factory=list)
-
-
-def eta_text(seconds: float | None) -> str:
-    """``ETA 1:05`` (empty while unknown)."""
-    if seconds is None:
-        return ""
-    seconds = max(0, round(seconds))
-    return f"ETA {seconds // 60}:{seconds % 60:02d}"
-
-
-def progress_text(status: JobStatus) -> str:
-    """``Stylising 12/40 · 45% · ETA 0:41``."""
-    parts = [STAGE_NAMES.get(status.stage, status.stage.title() or "Working")]
-    if status.total > 1:
-        parts[0] += f" {status.step}/{status.total}"
-    parts.append(f"{status.fraction:.0%}")
-    eta = eta_text(status.eta_s)
-    if eta:
-        parts.append(eta)
-    return " · ".join(parts)
 
 
 def report_rows(report: dict[str, Any] | None, result: str | None, seconds: float = 0.0) -> list[tuple[str, str]]:

@@ -21,10 +21,11 @@ from gt2gs_blender.app import deps
 from gt2gs_blender.app.images import write_png
 from gt2gs_blender.blender import splats, transfer_run, views
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from gt2gs_blender.blender.transfer_run import eta_text
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
 from gt2gs_blender.core.errors import MEMORY_ADVICE
 from gt2gs_blender.core.scene.ply_write import write_ply
-from gt2gs_blender.panels.transfer_panel import eta_text, transfer_view
+from gt2gs_blender.panels.transfer_panel import transfer_view
 
 from ..test_transfer import blob_scene, stripes
 from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit
@@ -106,9 +107,11 @@ def tick_until(run, condition, timeout: float = 120.0) -> JobStatus:
     raise AssertionError(f"timed out: {run.job.status} {run.job.stderr_tail()}")
 
 
-def test_transfer_operator_headless_adds_a_new_object(blob):
+def test_transfer_operator_headless_adds_a_new_object(blob, capfd):
     before, folders, original = snapshot(), job_folders(), dc(blob)
     assert bpy.ops.gt2gs.transfer_texture(preset="preview", n_views=3) == {"FINISHED"}
+    lines = [line for line in capfd.readouterr().out.splitlines() if line.startswith("gt2gs: ")]
+    assert any(line.startswith("gt2gs: Stylising") and "%" in line for line in lines), lines  # headless progress
     result = bpy.context.active_object
     assert result.name == "blob GT²" and splats.is_splat_object(result)
     assert colours_differ(dc(result), original)
