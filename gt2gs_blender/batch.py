@@ -3,12 +3,14 @@
 Imports the PLY, runs ``gt2gs.transfer_texture`` synchronously, exports the new object, and exits
 with 0 on success or 1 with one readable ``gt2gs: error: ...`` line on stderr. Uses the installed
 extension when Blender has it enabled, else registers this source tree. Options: ``--preset``,
-``--angle`` (degrees), ``--views N`` (automatic views), ``--weights DIR`` (VGG weights folder).
+``--angle`` (degrees), ``--views N`` (automatic views), ``--weights DIR`` (VGG weights folder),
+``--allow-fallback-weights`` (write a result made without VGG weights; by default that is an error).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import os
 import sys
 from pathlib import Path
@@ -25,6 +27,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--angle", type=float, help="texture orientation in the first view, degrees")
     parser.add_argument("--views", type=int, help="number of automatic views (default: the preset's)")
     parser.add_argument("--weights", help="folder with the VGG weights (default: $GT2GS_WEIGHTS_DIR)")
+    parser.add_argument(
+        "--allow-fallback-weights",
+        action="store_true",
+        help="write the result even when no VGG weights were found and a random network stood in",
+    )
     return parser.parse_args(argv)
 
 
@@ -41,6 +48,12 @@ def ensure_registered() -> None:
     import gt2gs_blender
 
     gt2gs_blender.register()
+
+
+def extension_module(name: str):
+    """A module of the registered extension (the installed ``bl_ext...`` copy or this source tree)."""
+    package = bpy.types.GT2GS_OT_transfer_texture.__module__.rsplit(".operators", 1)[0]
+    return importlib.import_module(f"{package}.{name}")
 
 
 def run(args: argparse.Namespace) -> None:
@@ -63,6 +76,13 @@ def run(args: argparse.Namespace) -> None:
     result = bpy.context.view_layer.objects.active
     if result is None or result == source:
         raise RuntimeError("the transfer made no result object")
+    outcome = extension_module("blender.transfer_run").OUTCOMES.get("transfer")
+    used_fallback = extension_module("panels.transfer_panel").used_fallback
+    if outcome is not None and used_fallback(outcome.report) and not args.allow_fallback_weights:
+        raise RuntimeError(
+            "no VGG weights were found, so a random network stood in and the result is not the method's: pass "
+            "--weights DIR (or set $GT2GS_WEIGHTS_DIR), or --allow-fallback-weights to write it anyway"
+        )
     with bpy.context.temp_override(active_object=result, object=result, selected_objects=[result]):
         bpy.ops.gt2gs.export_ply(filepath=os.path.abspath(args.out))
     print(f"gt2gs: wrote {args.out}")

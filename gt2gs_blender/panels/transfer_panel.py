@@ -17,6 +17,10 @@ from ..blender.transfer_run import progress_text
 from ..core.transfer.config import IN_SCENE, PARTS, user_settings
 from .sidebar import CATEGORY
 
+FALLBACK_WARNING = (
+    "no VGG weights were found, so a random network stood in and the result is not the method's: set Weights in "
+    "the add-on preferences"
+)
 ICONS = {IDLE: "INFO", RUNNING: "TIME", DONE: "CHECKMARK", ERROR: "ERROR", CANCELLED: "CANCEL"}
 
 
@@ -72,7 +76,15 @@ def transfer_view(target: str | None, running: JobStatus | None, last: transfer_
         CANCELLED: "Cancelled; the scene is unchanged",
         ERROR: f"Failed: {last.message}",
     }.get(last.state, last.message)
+    if last.state == DONE and used_fallback(last.report):
+        message += f"; {FALLBACK_WARNING}"
+        return TransferView(last.state, can, False, message, "ERROR", report_rows=rows)
     return TransferView(last.state, can, False, message, ICONS.get(last.state, "INFO"), report_rows=rows)
+
+
+def used_fallback(report: dict[str, Any] | None) -> bool:
+    """Whether a run's report says it used the random fallback network (no VGG weights were found)."""
+    return bool(((report or {}).get("weights") or {}).get("fallback"))
 
 
 def current_view(context) -> TransferView:

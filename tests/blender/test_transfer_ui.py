@@ -432,3 +432,20 @@ def test_every_setting_has_a_blender_property_unless_internal(fresh):
     for name, meta in SETTINGS.items():
         if meta.blender == IN_SCENE and not meta.internal:
             assert scene_props[name].name == meta.label and scene_props[name].description.startswith(meta.help)
+
+
+def test_batch_refuses_a_result_of_the_fallback_network_unless_allowed(fresh, inputs, tmp_path, capsys, monkeypatch):
+    from gt2gs_blender import batch
+
+    empty = tmp_path / "no_weights"
+    empty.mkdir()
+    monkeypatch.setenv("TORCH_HOME", str(empty))  # no torch hub cache either
+    monkeypatch.setenv("GT2GS_WEIGHTS_DIR", str(empty))
+    out = tmp_path / "out.ply"
+    argv = ["--ply", str(inputs["ply"]), "--texture", str(inputs["texture"]), "--out", str(out)]
+    argv += ["--preset", "preview", "--views", "2", "--weights", str(empty)]
+    assert batch.main(argv) == 1 and not out.exists()
+    assert "a random network stood in" in capsys.readouterr().err
+    assert batch.main([*argv, "--allow-fallback-weights"]) == 0 and out.is_file()
+    view = transfer_view("blob", None, transfer_run.OUTCOMES["transfer"])
+    assert view.icon == "ERROR" and "random network stood in" in view.message  # the panel says it too
