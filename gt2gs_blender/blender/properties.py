@@ -8,6 +8,7 @@ will use, and ``config_values`` reads them back into the config by the same name
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable
 from typing import Any
@@ -16,10 +17,12 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from ..core.transfer.config import IN_SCENE, Setting, user_settings
+from ..core.transfer.config import DEGREES, IN_SCENE, Setting, user_settings
 from ..core.transfer.presets import DEFAULT_PRESET, PRESETS
 
 DEFAULTS = PRESETS[DEFAULT_PRESET]
+ANGLE_DECIMALS = 4
+"""Angles come back from Blender's float32 radians to a ten-thousandth of a degree."""
 PATH_SETTINGS = {
     "weights_path": "Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth) or "
     "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"
@@ -50,6 +53,9 @@ def _property(name: str, meta: Setting, kind: type, update: Callable | None) -> 
         return EnumProperty(items=items, default=default, **common)
     if kind is str:
         return StringProperty(default=default or "", subtype="DIR_PATH", **common)
+    if meta.unit == DEGREES:
+        limits = {key: math.radians(v) for key, v in (("min", meta.min), ("max", meta.max)) if v is not None}
+        return FloatProperty(default=math.radians(default), subtype="ANGLE", **limits, **common)
     return (IntProperty if kind is int else FloatProperty)(default=default, **_limits(meta, kind), **common)
 
 
@@ -75,6 +81,8 @@ def _value(value: Any, meta: Setting, kind: type) -> Any:
     as the decimal the user typed (Blender keeps float32: 0.02 would reach the engine as 0.0199999996)."""
     if kind is tuple:
         return tuple(_decimal(v) for v in value)
+    if meta.unit == DEGREES:
+        return round(math.degrees(value), ANGLE_DECIMALS)
     if kind is float:
         return _decimal(value)
     if kind is str and not meta.choices:
@@ -85,8 +93,9 @@ def _value(value: Any, meta: Setting, kind: type) -> Any:
 def apply_preset(owner: Any, name: str) -> None:
     """Write preset ``name``'s values into the scene settings ``owner``."""
     values = PRESETS[name]
-    for setting, _meta, kind in user_settings(IN_SCENE):
+    for setting, meta, kind in user_settings(IN_SCENE):
         value = getattr(values, setting)
+        value = math.radians(value) if meta.unit == DEGREES else value
         setattr(owner, setting, "" if value is None and kind is str else value)
 
 

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import glob
+import math
 import os
 import resource
 import signal
@@ -298,7 +299,7 @@ def test_panel_settings_and_keywords_become_the_job_config(fresh):
     settings.preset = "balanced"  # choosing a preset shows its values in every setting
     preset, config = transfer_run.config_overrides(fresh.context, {})
     assert preset == "balanced" and config["resolution"] == 384 and make_preset(preset, **config) == PRESETS["balanced"]
-    settings.stylise_steps, settings.gpb, settings.angle, settings.texture_height = 12, False, 15.0, 96
+    settings.stylise_steps, settings.gpb, settings.angle, settings.texture_height = 12, False, math.radians(15), 96
     settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = True, 2.0, True
     settings.background = (0.0, 0.5, 1.0)
     _, config = transfer_run.config_overrides(fresh.context, {})
@@ -449,3 +450,10 @@ def test_batch_refuses_a_result_of_the_fallback_network_unless_allowed(fresh, in
     assert batch.main([*argv, "--allow-fallback-weights"]) == 0 and out.is_file()
     view = transfer_view("blob", None, transfer_run.OUTCOMES["transfer"])
     assert view.icon == "ERROR" and "random network stood in" in view.message  # the panel says it too
+
+
+def test_the_orientation_is_an_angle_property_in_degrees_for_the_engine(fresh):
+    prop = fresh.types.Scene.bl_rna.properties["gt2gs"].fixed_type.properties["angle"]
+    assert prop.subtype == "ANGLE"
+    fresh.context.scene.gt2gs.angle = math.radians(-42.5)
+    assert transfer_run.config_overrides(fresh.context, {})[1]["angle"] == -42.5

@@ -30,6 +30,8 @@ PARTS = {
 """The parts of a run the settings belong to, in the order the CLI's help and Blender's panels show them."""
 
 IN_SCENE, IN_PREFERENCES = "scene", "preferences"
+DEGREES = "°"
+"""The unit of angle settings (Blender shows them as angle properties, which hold radians)."""
 
 
 @dataclass(frozen=True)
@@ -239,7 +241,7 @@ class TransferConfig:
         "Orientation",
         "Angle of the texture in the first view, counter-clockwise",
         "gt2",
-        unit="°",
+        unit=DEGREES,
         min=-360.0,
         max=360.0,
     )
