@@ -33,7 +33,7 @@ from ..core.scene.inria import POSITION_NAMES, REST_PREFIX, SH_C0, core_groups, 
 from ..core.scene.ply import SplatArrays
 from ..core.scene.ply_header import SCALAR_TYPES, TYPE_FOR_CODE, type_code
 from ..core.scene.ply_write import write_layout
-from . import transform
+from . import display, transform
 
 COLOR_ATTRIBUTE = "Col"
 RADIUS_ATTRIBUTE = "radius"
@@ -80,11 +80,13 @@ def scene_to_object(
     source_path: str | None = None,
     source_format: str | None = None,
     with_material: bool = True,
+    with_display: bool = True,
 ) -> bpy.types.Object:
     """A new point-cloud object for ``scene`` (core ``SplatArrays``), linked into ``collection``.
 
     Needs a context with a scene and view layer (Blender converts mesh -> point cloud with its
-    operator). On failure nothing is left behind.
+    operator). ``with_display`` adds the Gaussian display modifier (``display.apply_display``); it draws
+    from the attributes and adds none to the point cloud. On failure nothing is left behind.
     """
     columns, layout = _scene_columns(scene)
     for prop in columns:
@@ -132,6 +134,8 @@ def scene_to_object(
             if made:
                 created.append(material)
             cloud.materials.append(material)
+        if with_display:
+            display.apply_display(obj)
         return obj
     except BaseException:
         _remove_ids(created)

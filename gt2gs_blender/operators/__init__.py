@@ -2,14 +2,14 @@
 
 Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (both take ``filepath``),
 ``gt2gs.transfer_texture`` and ``gt2gs.preview_orientation`` (``texture_path``, ``preset``, ``angle``,
-``n_views`` override the panel's settings).
+``n_views`` override the panel's settings), ``gt2gs.setup_scene`` (render settings for the splat display).
 """
 
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import dependencies, io_export, io_import, transfer
+from . import dependencies, display, io_export, io_import, transfer
 
-_group = ModuleGroup((io_import, io_export, transfer, dependencies))
+_group = ModuleGroup((io_import, io_export, display, transfer, dependencies))
 register = _group.register
 unregister = _group.unregister

@@ -82,6 +82,7 @@ class GT2GS_OT_import_ply(bpy.types.Operator, ImportHelper):
             material = splats.find_material()
             if material_before is None and material is not None and not material.users:
                 bpy.data.materials.remove(material)
+            display.remove_unused()
 
         try:
             for path in paths:
