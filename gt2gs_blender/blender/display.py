@@ -294,8 +294,29 @@ def apply_display(
     set_input(modifier, "Density", float(density))
     set_input(modifier, "Render Size", int(render_size))
     set_input(modifier, "Camera", camera)
+    _drive_render_size(obj, modifier, scene or bpy.context.scene)
     obj.update_tag()
     return modifier
+
+
+def _drive_render_size(obj: bpy.types.Object, modifier: bpy.types.NodesModifier, scene: bpy.types.Scene) -> None:
+    """Keep Render Size equal to the scene's larger output side (a simple-expression driver, no Python)."""
+    item = next(
+        i for i in modifier.node_group.interface.items_tree if i.item_type == "SOCKET" and i.name == "Render Size"
+    )
+    path = f'modifiers["{modifier.name}"]["{item.identifier}"]'
+    obj.driver_remove(path)
+    driver = obj.driver_add(path).driver
+    driver.type = "SCRIPTED"
+    for name, prop in (
+        ("x", "render.resolution_x"),
+        ("y", "render.resolution_y"),
+        ("p", "render.resolution_percentage"),
+    ):
+        var = driver.variables.new()
+        var.name, var.type = name, "SINGLE_PROP"
+        var.targets[0].id_type, var.targets[0].id, var.targets[0].data_path = "SCENE", scene, prop
+    driver.expression = "max(x, y) * p / 100"
 
 
 def display_modifier(obj: bpy.types.Object) -> bpy.types.NodesModifier | None:
