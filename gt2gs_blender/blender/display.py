@@ -33,7 +33,9 @@ ALPHA_MAX = 0.99
 EPS2D = 0.3
 """Screen-space dilation (px²) of the rasterizer (core.render.projection.EPS2D), restated: blender/ may not
 import the torch side of core."""
-TRANSPARENT_BOUNCES = 128
+TRANSPARENT_BOUNCES = 1024
+"""Cycles transparent bounces (max = min): grazing rays at the silhouette cross hundreds of faint splats; on the
+donut (256 px, view 0) object SSIM is 0.883 with 128, 0.939 with 256, 0.972 with 1024."""
 PREFIX = "gt2gs_"
 INPUTS = ("Density", "Points in Viewport", "Render Size", "Camera")
 
