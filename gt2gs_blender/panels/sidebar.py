@@ -52,6 +52,7 @@ class VIEW3D_PT_gt2gs_splat(bpy.types.Panel):
         row = layout.row(align=True)
         row.operator("gt2gs.import_ply", text="Import", icon="IMPORT")
         row.operator("gt2gs.export_ply", text="Export", icon="EXPORT")
+        layout.operator("gt2gs.setup_scene", icon="SCENE")
 
 
 classes = (VIEW3D_PT_gt2gs_splat,)
