@@ -15,8 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from ..errors import SplatFormatError
 from .codec import PathLike, as_arrays
 from .compressed_ply import is_compressed_ply, read_compressed_ply, write_compressed_ply
@@ -151,16 +149,9 @@ def read_splats(path: PathLike, *, drop_invalid: bool = False, **options: object
 
 def read_scene(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
     """Load any splat file as a ``GaussianScene`` of float32 tensors."""
-    import torch
-
     from .gaussians import GaussianScene
 
-    arrays = read_splats(path, drop_invalid=drop_invalid)
-    return GaussianScene(
-        **{key: torch.from_numpy(np.ascontiguousarray(values)) for key, values in arrays.tensors().items()},
-        extras=arrays.extras,
-        ply_layout=arrays.ply_layout,
-    )
+    return GaussianScene.from_arrays(read_splats(path, drop_invalid=drop_invalid))
 
 
 def output_format(path: PathLike, fmt: str | None = None) -> str:

@@ -9,11 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
 from .inria import SH_C0, sh_coeff_count, sh_degree_from_rest
+
+if TYPE_CHECKING:
+    from .ply import SplatArrays
 
 LOG_SCALE_MAX = 88.0
 """Log-scales are clamped here before ``exp``: exp(88) ~ 1.7e38 is the largest float32 power of e, so a
@@ -61,6 +65,12 @@ class GaussianScene:
                 raise ValueError(f"extra property {key!r} has {value.shape[0]} rows, expected {n}")
 
     # -- construction -------------------------------------------------------------------------------
+    @classmethod
+    def from_arrays(cls, arrays: SplatArrays) -> GaussianScene:
+        """The scene of a file's numpy arrays (``SplatArrays``, as every splat reader returns them)."""
+        tensors = {key: torch.from_numpy(np.ascontiguousarray(v)) for key, v in arrays.tensors().items()}
+        return cls(**tensors, extras=arrays.extras, ply_layout=arrays.ply_layout)
+
     @classmethod
     def from_activated(
         cls,

@@ -83,16 +83,9 @@ class SplatArrays:
 
 def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
     """Load a 3DGS PLY as a ``GaussianScene`` of float32 tensors (see ``read_ply_arrays``)."""
-    import torch
-
     from .gaussians import GaussianScene
 
-    arrays = read_ply_arrays(path, drop_invalid=drop_invalid)
-    return GaussianScene(
-        **{key: torch.from_numpy(values) for key, values in arrays.tensors().items()},
-        extras=arrays.extras,
-        ply_layout=arrays.ply_layout,
-    )
+    return GaussianScene.from_arrays(read_ply_arrays(path, drop_invalid=drop_invalid))
 
 
 def read_ply_arrays(path: PathLike, *, drop_invalid: bool = False) -> SplatArrays:
