@@ -24,7 +24,7 @@ import bpy
 
 import gt2gs_blender
 from gt2gs_blender.blender import display, splats
-from gt2gs_blender.core.scene.ply import SplatArrays
+from gt2gs_blender.core.scene.arrays import SplatArrays
 
 DONUT = ROOT.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
 OUT = ROOT / "bench" / "out" / "display.json"

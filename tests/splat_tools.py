@@ -29,7 +29,7 @@ def splat_transform(*args: str | Path, timeout: float = 300) -> subprocess.Compl
 def synthetic_scene(n: int = 2000, sh_degree: int = 3, seed: int = 0):
     """A small random scene with every SH band used: positions in a 2-unit box, log scales -5..-1,
     random unit quaternions, opacity logits -4..4, DC -1.5..1.5, rest bands -0.3..0.3 (SplatArrays)."""
-    from gt2gs_blender.core.scene.ply import SplatArrays
+    from gt2gs_blender.core.scene.arrays import SplatArrays
 
     rng = np.random.default_rng(seed)
     quats = rng.normal(size=(n, 4))

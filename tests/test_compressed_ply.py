@@ -20,11 +20,12 @@ import pytest
 import torch
 
 from gt2gs_blender.core.errors import SplatFormatError
+from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.codec import canonical_quats, sigmoid
 from gt2gs_blender.core.scene.compressed_ply import is_compressed_ply, read_compressed_ply, write_compressed_ply
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.inria import SH_C0
-from gt2gs_blender.core.scene.ply import SplatArrays, read_ply_arrays
+from gt2gs_blender.core.scene.ply import read_ply_arrays
 from gt2gs_blender.core.scene.ply_header import read_ply_header
 from gt2gs_blender.core.scene.ply_write import write_ply
 

@@ -19,8 +19,8 @@ import torch
 from gt2gs_blender.blender import transform
 from gt2gs_blender.core.rotations import quats_to_matrices
 from gt2gs_blender.core.scene import inria
+from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
-from gt2gs_blender.core.scene.ply import SplatArrays
 
 PACKAGE = Path(__file__).resolve().parents[1] / "gt2gs_blender"
 
@@ -163,7 +163,7 @@ def test_the_shared_modules_and_the_bake_need_no_torch():
         "from gt2gs_blender.blender import transform\n"
         "from gt2gs_blender.core import rotations\n"
         "from gt2gs_blender.core.scene import inria, ply_write\n"
-        "from gt2gs_blender.core.scene.ply import SplatArrays\n"
+        "from gt2gs_blender.core.scene.arrays import SplatArrays\n"
         "z = lambda *s: np.zeros(s, np.float32)\n"
         "scene = SplatArrays(z(2, 3), z(2, 4), z(2, 3), z(2), z(2, 3), z(2, 3, 3), {})\n"
         "baked, notes = transform.bake(scene, np.diag([1.0, 2.0, 3.0, 1.0]))\n"

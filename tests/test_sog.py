@@ -24,8 +24,9 @@ import torch
 
 from gt2gs_blender.core.errors import SplatFormatError
 from gt2gs_blender.core.scene import codec
+from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.codec import canonical_quats, sigmoid
-from gt2gs_blender.core.scene.ply import SplatArrays, read_ply_arrays
+from gt2gs_blender.core.scene.ply import read_ply_arrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 from gt2gs_blender.core.scene.sog import decode_webp_cv2, read_sog
 

@@ -21,10 +21,11 @@ from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.errors import SplatFormatError
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene import codec
+from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.codec import canonical_quats, colour_from_dc, sigmoid
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.inria import SH_C0
-from gt2gs_blender.core.scene.ply import SplatArrays, read_ply, read_ply_arrays
+from gt2gs_blender.core.scene.ply import read_ply, read_ply_arrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 from gt2gs_blender.core.scene.spz import read_spz, write_spz
 

@@ -29,8 +29,8 @@ import bpy
 import numpy as np
 
 from ..core.scene import inria
+from ..core.scene.arrays import SplatArrays
 from ..core.scene.inria import POSITION_NAMES, REST_PREFIX, SH_C0, core_groups, core_property_names, tensor_view
-from ..core.scene.ply import SplatArrays
 from ..core.scene.ply_header import SCALAR_TYPES, TYPE_FOR_CODE, type_code
 from ..core.scene.ply_write import write_layout
 from . import display, transform

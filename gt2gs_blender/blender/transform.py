@@ -29,7 +29,7 @@ from ..core.rotations import quats_to_matrices
 from ..core.scene.inria import NORMAL_NAMES, SH_C0, sh_degree_from_rest
 
 if TYPE_CHECKING:
-    from ..core.scene.ply import SplatArrays
+    from ..core.scene.arrays import SplatArrays
 
 _SH_C1 = 0.4886025119029199
 _SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)

@@ -18,8 +18,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import SplatFormatError
+from .arrays import SplatArrays
 from .inria import SH_C0, sh_degree_from_rest
-from .ply import SplatArrays
 
 if TYPE_CHECKING:
     from .gaussians import GaussianScene

@@ -39,6 +39,7 @@ import numpy as np
 
 from ..atomic import atomic_write
 from ..errors import PlyFormatError, SplatFormatError
+from .arrays import SplatArrays
 from .codec import (
     PathLike,
     as_arrays,
@@ -54,7 +55,6 @@ from .codec import (
     smallest_three,
 )
 from .inria import REST_PREFIX, rest_per_channel, tensor_view
-from .ply import SplatArrays
 from .ply_header import FORMATS, HEADER_LIMIT, SCALAR_TYPES, PlyElement, PlyHeader, _parse_header
 
 if TYPE_CHECKING:

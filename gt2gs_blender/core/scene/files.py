@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ..errors import SplatFormatError
+from .arrays import SplatArrays
 from .codec import PathLike, as_arrays
 from .compressed_ply import is_compressed_ply, read_compressed_ply, write_compressed_ply
-from .ply import SplatArrays, read_ply_arrays
+from .ply import read_ply_arrays
 from .ply_header import read_ply_header
 from .ply_write import write_ply
 from .sog import read_sog

@@ -17,7 +17,7 @@ import torch
 from .inria import SH_C0, sh_coeff_count, sh_degree_from_rest
 
 if TYPE_CHECKING:
-    from .ply import SplatArrays
+    from .arrays import SplatArrays
 
 LOG_SCALE_MAX = 88.0
 """Log-scales are clamped here before ``exp``: exp(88) ~ 1.7e38 is the largest float32 power of e, so a

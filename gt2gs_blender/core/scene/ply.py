@@ -28,7 +28,6 @@ import os
 import struct
 import warnings
 from collections.abc import Iterable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, BinaryIO
 
 import numpy as np
@@ -37,6 +36,7 @@ from ..errors import NotGaussianPlyError, PlyFormatError
 
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
+from .arrays import SplatArrays
 from .inria import REQUIRED, REST_PREFIX, core_groups, rest_per_channel, tensor_view
 from .ply_header import (
     FORMATS,
@@ -51,34 +51,6 @@ from .ply_header import (
 )
 
 _STRUCT_CHAR = {"i1": "b", "u1": "B", "i2": "h", "u2": "H", "i4": "i", "u4": "I"}
-
-
-@dataclass
-class SplatArrays:
-    """The numpy twin of ``GaussianScene``: the same field names, shapes and meaning, float32 arrays."""
-
-    means: np.ndarray
-    quats: np.ndarray
-    log_scales: np.ndarray
-    opacity_logits: np.ndarray
-    sh_dc: np.ndarray
-    sh_rest: np.ndarray
-    extras: dict[str, np.ndarray]
-    ply_layout: tuple[tuple[str, str], ...] | None = None
-
-    def __len__(self) -> int:
-        return int(self.means.shape[0])
-
-    def tensors(self) -> dict[str, np.ndarray]:
-        """The parameter arrays by name (the keys of ``GaussianScene.tensors()``)."""
-        return {
-            "means": self.means,
-            "quats": self.quats,
-            "log_scales": self.log_scales,
-            "opacity_logits": self.opacity_logits,
-            "sh_dc": self.sh_dc,
-            "sh_rest": self.sh_rest,
-        }
 
 
 def read_ply(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:

@@ -12,8 +12,9 @@ from ..atomic import atomic_write
 
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
+from .arrays import SplatArrays
 from .inria import NORMAL_NAMES, REST_PREFIX, core_groups, core_property_names, tensor_view
-from .ply import SplatArrays, _field_block, _record_dtype
+from .ply import _field_block, _record_dtype
 from .ply_header import _PROPERTY_NAME, FORMATS, SCALAR_TYPES, TYPE_FOR_CODE, PathLike, type_code
 
 _ASCII_FORMAT = {"f4": "%.9g", "f8": "%.17g"}  # enough digits to read back exactly; integers use %d

@@ -43,8 +43,8 @@ import numpy as np
 
 from ..errors import SplatFormatError
 from . import codec
+from .arrays import SplatArrays
 from .codec import PathLike, canonical_quats, from_smallest_three, logit, make_arrays, read_bytes
-from .ply import SplatArrays
 
 WebpDecoder = Callable[[bytes, str], "np.ndarray | None"]
 """``decode_webp(data, name)``: the (H, W, 4) uint8 RGBA pixels of a WebP file, or None if it does not decode."""

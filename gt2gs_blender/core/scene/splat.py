@@ -12,6 +12,7 @@ import numpy as np
 
 from ..atomic import atomic_write
 from ..errors import SplatFormatError
+from .arrays import SplatArrays
 from .codec import (
     PathLike,
     as_arrays,
@@ -24,7 +25,6 @@ from .codec import (
     read_bytes,
     sigmoid,
 )
-from .ply import SplatArrays
 
 RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
 """One splat's 32 bytes."""

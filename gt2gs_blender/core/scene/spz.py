@@ -51,6 +51,7 @@ import numpy as np
 from ..atomic import atomic_write
 from ..errors import SplatFormatError
 from . import codec
+from .arrays import SplatArrays
 from .codec import (
     PathLike,
     as_arrays,
@@ -65,7 +66,6 @@ from .codec import (
     smallest_three,
 )
 from .inria import sh_degree_from_rest
-from .ply import SplatArrays
 
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
