@@ -89,41 +89,15 @@ def rasterization(
     """
     name = resolve_backend(backend, means.device)
     n_cams = viewmats.shape[0]
+    inputs = (means, quats, scales, opacities, colors, viewmats, ks, width, height)
+    options = {"sh_degree": sh_degree, "near_plane": near_plane, "far_plane": far_plane, "with_depth": render_depth}
     if name == "gsplat":
-        image, alpha = gsplat_backend.rasterize(
-            means,
-            quats,
-            scales,
-            opacities,
-            colors,
-            viewmats,
-            ks,
-            width,
-            height,
-            sh_degree=sh_degree,
-            near_plane=near_plane,
-            far_plane=far_plane,
-            with_depth=render_depth,
-        )
+        image, alpha = gsplat_backend.rasterize(*inputs, **options)
         proj = None
     else:
         backend_module = cpu_backend if name == "cpu" else torch_backend
         projector = cpu_backend.project if name == "cpu" else project
-        proj = projector(
-            means,
-            quats,
-            scales,
-            opacities,
-            colors,
-            viewmats,
-            ks,
-            width,
-            height,
-            sh_degree=sh_degree,
-            near_plane=near_plane,
-            far_plane=far_plane,
-            with_depth=render_depth,
-        )
+        proj = projector(*inputs, **options)
         image, alpha = backend_module.composite(proj, n_cams, width, height)
     rgb, depth = (image[..., :-1], image[..., -1]) if render_depth else (image, None)
     if backgrounds is not None:
