@@ -74,3 +74,18 @@ def preset(name: str, **overrides: Any) -> TransferConfig:
 def paper_value(name: str) -> Any:
     """The paper's value of a setting (its ``paper-llff`` preset), for help texts."""
     return getattr(PRESETS["paper-llff"], name)
+
+
+GPU_PRESETS = frozenset({"paper-llff", "paper-360"})
+"""Presets meant for a CUDA GPU (the paper's schedules take hours on a CPU): the CLI's help and Blender's
+preset menu mark them, and Blender refuses them on a machine without CUDA."""
+
+
+def gpu_preset_problem(name: str, cuda: bool) -> str | None:
+    """Why preset ``name`` cannot run on this machine (it needs a CUDA GPU, ``cuda`` False), else None."""
+    if name not in GPU_PRESETS or cuda:
+        return None
+    return (
+        f"the {name!r} preset is the paper's schedule for a CUDA GPU (hours on a CPU) and no CUDA GPU was "
+        "found: choose Balanced or Fast"
+    )
