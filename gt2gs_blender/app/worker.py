@@ -30,11 +30,17 @@ import sys
 import traceback
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..core.errors import GT2GSError, out_of_memory_message
-from ..core.progress import Cancelled, Progress
+from ..core.progress import Cancelled, Progress, Tracker
 from .protocol import EXIT_CANCELLED, EXIT_DONE, EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, Events, JobSpec
+
+if TYPE_CHECKING:
+    from ..core.transfer.config import TransferConfig
+
+COMPILE_STAGE = "compile"
+"""The stage that builds the CPU rasterizer before a run's first render (only when it is not built yet)."""
 
 
 class CancelFlag:
@@ -71,6 +77,37 @@ def _config(spec: JobSpec):
         raise GT2GSError(f"job settings: {exc}") from None
 
 
+def _send(events: Events, p: Progress, frame: Path | None = None) -> None:
+    """One progress event (``frame``: the PNG of its preview image, if any)."""
+    events(
+        "progress",
+        stage=p.stage,
+        step=p.step,
+        total=p.total,
+        fraction=p.fraction,
+        eta_s=p.eta_s,
+        message=p.message,
+        preview=None if frame is None else str(frame),
+    )
+
+
+def _prepare_kernel(config: TransferConfig, progress: Callable[[Progress], None], cancel: Callable[[], bool]) -> None:
+    """Build the CPU rasterizer first, as a ``compile`` stage, when the run will use it and it is not built
+    yet (once per kernel version: the UI shows a stage, not a run stuck at 0 %)."""
+    from ..core.device import resolve_device
+    from ..core.render import cpu_backend, kernel_cache
+
+    if config.backend not in ("auto", "cpu") or resolve_device(config.device).type != "cpu":
+        return
+    if kernel_cache.is_built():
+        return
+    tracker = Tracker(progress, cancel, {COMPILE_STAGE: 1.0}, what="compile")
+    tracker.begin(COMPILE_STAGE)
+    tracker.tell(0, 1, "compiling the CPU rasterizer (first run only, about a minute)")
+    cpu_backend.load_kernel()
+    tracker.end()
+
+
 def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
     """Run the texture transfer (``jobs.run_transfer``), sending progress and preview frames as events."""
     from ..core.scene.files import read_scene
@@ -92,17 +129,9 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
             frame = spec.preview_dir / f"preview_{frames:04d}.png"
             write_png(frame, p.preview)
             frames += 1
-        events(
-            "progress",
-            stage=p.stage,
-            step=p.step,
-            total=p.total,
-            fraction=p.fraction,
-            eta_s=p.eta_s,
-            message=p.message,
-            preview=None if frame is None else str(frame),
-        )
+        _send(events, p, frame)
 
+    _prepare_kernel(config, progress, cancel)
     run_transfer(
         scene,
         texture,
@@ -119,7 +148,7 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
     events("done", output=str(spec.output), report=None if spec.report is None else str(spec.report))
 
 
-def run_preview(spec: JobSpec, events: Events) -> None:
+def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
     """Render the orientation preview of the first view as a PNG."""
     from ..core.cameras.generate import auto_views
     from ..core.scene.files import read_scene
@@ -130,6 +159,7 @@ def run_preview(spec: JobSpec, events: Events) -> None:
     scene = read_scene(spec.input)
     config = _config(spec)
     views = _views(spec)
+    _prepare_kernel(config, lambda p: _send(events, p), cancel)
     camera = (
         views[0]
         if isinstance(views, list)
@@ -162,7 +192,7 @@ def run(job_file: str | os.PathLike, events: Events) -> int:
         if spec.kind == "transfer":
             run_transfer(spec, events, cancel)
         else:
-            run_preview(spec, events)
+            run_preview(spec, events, cancel)
         return EXIT_DONE
     except GT2GSError as exc:
         if isinstance(exc, Cancelled):

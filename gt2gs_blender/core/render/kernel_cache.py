@@ -96,6 +96,11 @@ def build_dir(csrc: Path = CSRC) -> Path:
     return cache_base() / f"raster_cpu-{build_key(kernel_sources(csrc))}"
 
 
+def is_built(csrc: Path = CSRC) -> bool:
+    """Whether the kernel of ``csrc`` is already compiled here (so loading it takes no compile)."""
+    return (build_dir(csrc) / DONE).is_file()
+
+
 def load(csrc: Path = CSRC) -> ModuleType:
     """The kernel built from ``csrc``: imported from its cache folder, compiled there first if needed."""
     sources = kernel_sources(csrc)
