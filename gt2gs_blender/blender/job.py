@@ -63,6 +63,15 @@ class JobStatus:
         return self.state in FINISHED_STATES
 
 
+def worker_env(deps_dir: str | os.PathLike | None, env: dict[str, str] | None = None) -> dict[str, str]:
+    """The environment of a process run with the worker's Python: the extension's dependencies and the
+    package itself on ``PYTHONPATH``, unbuffered output."""
+    env = dict(os.environ if env is None else env)
+    env["PYTHONPATH"] = worker_pythonpath(PACKAGE_DIR.parent, deps_dir, env.get("PYTHONPATH"))
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
 class Job:
     """One worker run in its own temporary folder. Write the inputs into ``folder``, then ``start``."""
 
@@ -92,13 +101,10 @@ class Job:
         """Write ``job.json`` (with the cancel file and preview folder of this job) and launch the worker."""
         spec = {"cancel_file": "cancel", "preview_dir": "previews", **spec}
         self.path("job.json").write_text(json.dumps(spec, indent=1), encoding="utf-8")
-        env = dict(self.env)
-        env["PYTHONPATH"] = worker_pythonpath(PACKAGE_DIR.parent, self.deps_dir, env.get("PYTHONPATH"))
-        env["PYTHONUNBUFFERED"] = "1"
         self.process = subprocess.Popen(
             self.command(),
             cwd=self.folder,
-            env=env,
+            env=worker_env(self.deps_dir, self.env),
             stdin=subprocess.DEVNULL,
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,

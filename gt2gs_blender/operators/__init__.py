@@ -8,8 +8,8 @@ Operator ids scripts rely on: ``gt2gs.import_ply`` and ``gt2gs.export_ply`` (bot
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import dependencies, display, io_export, io_import, transfer
+from . import dependencies, display, io_export, io_import, machine, transfer
 
-_group = ModuleGroup((io_import, io_export, display, transfer, dependencies))
+_group = ModuleGroup((io_import, io_export, display, transfer, dependencies, machine))
 register = _group.register
 unregister = _group.unregister

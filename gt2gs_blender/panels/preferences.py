@@ -1,5 +1,10 @@
-"""The extension's preferences: dependency status and install, and the machine settings (device, threads,
-weights, rasterizer, caches) generated from the transfer settings' metadata."""
+"""The extension's preferences: dependency status and install, what a run would use on this machine (weights,
+rasterizer, compiler, CUDA, kernel cache) with Download Weights, and the machine settings (device, threads,
+weights, rasterizer, caches) generated from the transfer settings' metadata.
+
+What the machine box shows comes from ``machine_rows`` and ``weights_offer``, plain functions the tests
+check; ``draw`` only lays them out.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +12,18 @@ import bpy
 from bpy.props import EnumProperty
 
 from ..app import deps
-from ..blender import addon, properties
+from ..blender import addon, machine, properties
 from ..core.transfer.config import IN_PREFERENCES, user_settings
 from ..operators import dependencies
+from ..operators import machine as machine_ops
+from .sections import draw_setting
+
+WEIGHTS_FILE = "vgg16-397923af.pth"
+
+
+def _machine_changed(self, context) -> None:
+    """Check the machine again when a setting that changes what it finds changes."""
+    machine_ops.check(context)
 
 
 def dependency_rows(deps_dir: str | None) -> list[tuple[str, str, bool]]:
@@ -21,6 +35,44 @@ def dependency_rows(deps_dir: str | None) -> list[tuple[str, str, bool]]:
             found += f" (tested: {dep.pinned})"
         rows.append((dep.module, found, dep.ok))
     return rows
+
+
+def machine_rows(state: machine.MachineState) -> list[tuple[str, str, str]]:
+    """(label, value, icon) rows of what a transfer would use here, from the last machine check."""
+    if state.info is None:
+        if state.running is not None:
+            return [("Machine", "checking…", "TIME")]
+        return [("Machine", state.error or "not checked yet", "ERROR" if state.error else "INFO")]
+    info = state.info
+    weights = info.get("weights") or {}
+    if weights.get("fallback"):
+        shown = "none found: a RANDOM network would stand in (results look wrong)"
+    else:
+        shown = f"{weights.get('spec')} from {weights.get('weights_file')}"
+    cuda = info.get("cuda_device") or ("found" if info.get("cuda") else "not found")
+    built = "built" if info.get("kernel_built") else "not built yet"
+    return [
+        ("Weights", shown, "ERROR" if weights.get("fallback") else "CHECKMARK"),
+        ("Rasterizer", f"{info.get('rasterizer_label')} ({info.get('rasterizer_note')})", "CHECKMARK"),
+        ("C++ Compiler", info.get("compiler") or "not found", "CHECKMARK" if info.get("compiler") else "ERROR"),
+        ("CUDA", f"{cuda} (torch {info.get('torch')})", "CHECKMARK" if info.get("cuda") else "INFO"),
+        ("Kernel Cache", f"{info.get('kernel_cache')} ({built})", "FILE_FOLDER"),
+    ]
+
+
+def weights_offer(state: machine.MachineState, online: bool) -> tuple[bool, str]:
+    """(offer the Download Weights button, advice line) for the weights the last check found."""
+    info = state.info or {}
+    weights = info.get("weights") or {}
+    if not weights.get("fallback"):
+        return False, ""
+    folders = info.get("weights_folders") or []
+    where = f"put {WEIGHTS_FILE} in {folders[-1]}" if folders else f"set Weights to a folder with {WEIGHTS_FILE}"
+    if state.running == "download":
+        return False, "Downloading the VGG-16 weights…"
+    if online:
+        return True, f"Download them from {info.get('download_url')}, or {where}"
+    return False, f"Allow Online Access (Preferences ▸ System) to download them, or {where}"
 
 
 class GT2GS_AP_preferences(bpy.types.AddonPreferences):
@@ -36,7 +88,7 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
                 ("CUDA", "CUDA", "torch for NVIDIA GPUs (CUDA 12.8, a large download)"),
             ),
         ),
-        **properties.annotations(IN_PREFERENCES),
+        **properties.annotations(IN_PREFERENCES, dict.fromkeys(machine.MACHINE_SETTINGS, _machine_changed)),
     }
 
     def draw(self, context):
@@ -55,10 +107,25 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
         row.operator(dependencies.GT2GS_OT_install_dependencies.bl_idname, icon="IMPORT")
         if not bpy.app.online_access:
             box.label(text="Allow Online Access (Preferences ▸ System) to download packages", icon="INFO")
+        box = layout.box()
+        box.label(text="What a Transfer Uses on This Machine")
+        column = box.column(align=True)
+        for label, value, icon in machine_rows(machine.current()):
+            row = column.split(factor=0.3)
+            row.label(text=label, icon=icon)
+            row.label(text=value)
+        offer, advice = weights_offer(machine.current(), bpy.app.online_access)
+        if advice:
+            box.label(text=advice, icon="INFO")
+        row = box.row()
+        row.operator(machine_ops.GT2GS_OT_check_machine.bl_idname, icon="FILE_REFRESH")
+        if offer:
+            row.operator(machine_ops.GT2GS_OT_download_weights.bl_idname, icon="IMPORT")
         column = layout.column()
         column.use_property_split = True
+        info = machine.current().info
         for name, _, _ in user_settings(IN_PREFERENCES):
-            column.prop(self, name)
+            draw_setting(column, self, name, info)
 
 
 classes = (GT2GS_AP_preferences,)

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from ...core.transfer.config import PARTS, Setting, TransferConfig, user_settings
-from ...core.transfer.presets import DEFAULT_PRESET, PRESET_HELP, PRESETS, paper_value, preset
+from ...core.transfer.presets import DEFAULT_PRESET, GPU_PRESETS, PRESET_HELP, PRESETS, paper_value, preset
 from .args import color
 
 METAVARS = {"px": "PX", "°": "DEG", "steps": "N"}
@@ -32,7 +32,9 @@ def add_setting_arguments(parser: argparse.ArgumentParser, given: tuple[str, ...
         choices=tuple(PRESETS),
         default=DEFAULT_PRESET,
         help=f"settings preset (default: {DEFAULT_PRESET}): "
-        + "; ".join(f"{name}: {text}" for name, text in PRESET_HELP.items()),
+        + "; ".join(
+            f"{name}{' (GPU only)' if name in GPU_PRESETS else ''}: {text}" for name, text in PRESET_HELP.items()
+        ),
     )
     groups = {part: parser.add_argument_group(f"{title.lower()} settings") for part, title in PARTS.items()}
     for name, meta, kind in user_settings():

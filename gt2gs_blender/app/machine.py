@@ -1,0 +1,118 @@
+"""What a run would use on this machine: feature weights, rasterizer, C++ compiler, CUDA, kernel cache.
+
+``python -m gt2gs_blender.app.machine [--weights PATH] [--features F] [--backend B] [--device D] [--download]``
+prints it as one JSON object on stdout. Blender runs it with the worker's Python (torch never loads into
+Blender) to fill its preferences and to know whether CUDA is there; ``--download`` first fetches
+torchvision's VGG-16 weights into torch's hub cache. Nothing is compiled here: the kernel's state is read
+from its cache.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from typing import Any
+
+from ..core.errors import GT2GSError
+
+RASTERIZERS = {"cpu": "compiled CPU kernel", "torch": "portable torch", "gsplat": "gsplat CUDA"}
+"""What the preferences call each rasterizer backend."""
+
+
+def compiler_found() -> str | None:
+    """The C++ compiler's ``--version`` line, None when there is no usable compiler."""
+    from ..core.render import kernel_cache
+
+    command = kernel_cache.compiler()
+    if shutil.which(command) is None:
+        return None
+    identity = kernel_cache.compiler_identity(command)
+    return None if "unusable" in identity else identity
+
+
+def rasterizer(backend: str, cuda: bool, compiler: str | None, built: bool) -> tuple[str, str]:
+    """(backend, note) a run with ``backend`` would use, as ``core.render.resolve_backend`` picks it, without
+    building the kernel."""
+    from ..core.render import gsplat_backend
+
+    if cuda and backend != "torch":
+        if gsplat_backend.available():
+            return "gsplat", "CUDA kernels"
+        return "torch", "on the GPU (install gsplat for the faster CUDA rasterizer)"
+    if backend == "torch":
+        return "torch", "chosen in the preferences"
+    if built:
+        return "cpu", "built"
+    if compiler is not None:
+        return "cpu", "compiled at the first run (about a minute, once)"
+    return "torch", "no C++ compiler found, so the portable (slower) rasterizer runs"
+
+
+def machine_info(
+    weights_path: str | None = None, features: str = "auto", backend: str = "auto", device: str = "auto"
+) -> dict[str, Any]:
+    """A JSON-ready description of what a run with these machine settings would use."""
+    import torch
+
+    from ..core.device import resolve_device
+    from ..core.features.weights import VGG16_URL, resolve_weights, search_dirs
+    from ..core.render import kernel_cache
+
+    cuda = torch.cuda.is_available()
+    info: dict[str, Any] = {
+        "torch": torch.__version__,
+        "cuda": cuda,
+        "cuda_device": torch.cuda.get_device_name(0) if cuda else None,
+        "threads": torch.get_num_threads(),
+        "download_url": VGG16_URL,
+    }
+    try:
+        info["device"] = str(resolve_device(device))
+    except GT2GSError as exc:
+        info["device"], info["device_error"] = "cpu", str(exc)
+    try:
+        info["weights"] = resolve_weights(features, weights_path).info
+        info["weights_folders"] = [str(folder) for folder, _ in search_dirs(weights_path)]
+    except GT2GSError as exc:
+        info["weights"] = {"spec": None, "weights_file": None, "fallback": True, "reason": str(exc), "error": True}
+        info["weights_folders"] = []
+    compiler = compiler_found()
+    built = kernel_cache.is_built()
+    name, note = rasterizer(backend, info["device"] == "cuda", compiler, built)
+    info.update(
+        compiler=compiler,
+        kernel_cache=str(kernel_cache.cache_base()),
+        kernel_built=built,
+        rasterizer=name,
+        rasterizer_label=RASTERIZERS[name],
+        rasterizer_note=note,
+    )
+    return info
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Print the machine description as JSON (after downloading the weights when asked); 1 on an error."""
+    parser = argparse.ArgumentParser(prog="python -m gt2gs_blender.app.machine", description=__doc__)
+    parser.add_argument("--weights", default=None)
+    parser.add_argument("--features", default="auto")
+    parser.add_argument("--backend", default="auto")
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--download", action="store_true", help="download torchvision's VGG-16 weights first")
+    args = parser.parse_args(argv)
+    try:
+        if args.download:
+            from ..core.features.weights import download_vgg16
+
+            download_vgg16(True)
+        info = machine_info(args.weights, args.features, args.backend, args.device)
+    except GT2GSError as exc:
+        print(json.dumps({"error": str(exc)}))
+        return 1
+    print(json.dumps(info))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
