@@ -23,7 +23,8 @@ import numpy as np
 
 from ..core.progress import format_eta
 from ..core.transfer.config import IN_PREFERENCES, IN_SCENE
-from . import addon, properties, splats, views
+from ..core.transfer.presets import GPU_PRESETS
+from . import addon, machine, properties, splats, textures, views
 from .job import CANCELLED, DONE, ERROR, Job, JobStatus
 
 SELECTION_ATTRIBUTE = ".selection"
@@ -34,6 +35,7 @@ RESULT_SUFFIX = " GT²"
 
 STAGE_NAMES = {
     "starting": "Starting",
+    "compile": "Compiling the CPU rasterizer (first run only)",
     "prepare": "Preparing views",
     "bank": "Texture bank",
     "stylise": "Stylising",
@@ -67,13 +69,15 @@ class RunError(Exception):
 
 @dataclass
 class Outcome:
-    """How the last transfer ended, for the panel: state, a message, the report, the result object's name."""
+    """How the last run ended, for the panel: state, a message, the report, the result object's name, and how the
+    result was applied (``NEW`` or ``IN_PLACE``)."""
 
     state: str
     message: str
     report: dict[str, Any] | None = None
     result: str | None = None
     seconds: float = 0.0
+    mode: str = "NEW"
 
 
 ACTIVE: dict[str, TransferRun] = {}
@@ -99,6 +103,39 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     if "angle" in overrides:
         config["angle"] = float(overrides["angle"])
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
+
+
+def machine_settings(context) -> dict[str, Any]:
+    """The preferences' settings that decide what the machine check finds (none set: the engine's defaults)."""
+    prefs = addon.preferences(context)
+    if prefs is None:
+        return {}
+    values = properties.config_values(prefs, IN_PREFERENCES)
+    return {name: values[name] for name in machine.MACHINE_SETTINGS if values.get(name) is not None}
+
+
+def gpu_preset_check(context, preset: str) -> None:
+    """RunError when ``preset`` needs a CUDA GPU this machine lacks (asks the machine first if not known yet)."""
+    settings = machine_settings(context)
+    device = settings.get("device", "auto")
+    if preset in GPU_PRESETS and device != "cpu" and machine.current().info is None:
+        machine.probe(settings, addon.deps_dir())
+    problem = machine.gpu_problem(preset, device, machine.current())
+    if problem:
+        raise RunError(problem)
+
+
+def first_view_label(context) -> str:
+    """Which view is the first one, the view the texture's angle is measured in."""
+    settings = context.scene.gt2gs
+    if settings.view_source == "AUTO":
+        return "automatic view 1, in front (Blender's Front view, from -Y), 20° above"
+    if settings.view_source == "CAMERAS_JSON":
+        return f"the first camera of {os.path.basename(settings.cameras_json) or 'cameras.json'}"
+    collection = settings.camera_collection if settings.view_source == "COLLECTION" else None
+    objects = collection.all_objects if collection is not None else context.scene.objects
+    names = sorted(o.name for o in objects if o.type == "CAMERA")
+    return f"camera {names[0]!r} (first by name)" if names else "no camera yet"
 
 
 def views_label(settings) -> str | None:
@@ -148,6 +185,9 @@ def texture_spec(context, job: Job, override: str | None) -> str:
         path = os.path.abspath(bpy.path.abspath(chosen))
         if not os.path.isfile(path):
             raise RunError(f"texture file not found: {path}")
+        problem = textures.texture_problem(path)
+        if problem:
+            raise RunError(problem)
         return path
     image = settings.texture_image
     if image is None:
@@ -183,8 +223,9 @@ def selected_points(obj) -> np.ndarray:
     return indices
 
 
-def show_preview(path: str) -> None:
-    """Load a PNG frame into the panel's preview image (an ImagePreview, not a datablock of the file)."""
+def show_preview(path: str, first_view: str) -> None:
+    """Load a PNG frame of ``first_view`` into the panel's preview image (an ImagePreview, not a datablock of
+    the file)."""
     image = bpy.data.images.load(path, check_existing=False)
     try:
         width, height = image.size
@@ -198,6 +239,7 @@ def show_preview(path: str) -> None:
     preview = collection.get(PREVIEW_KEY) or collection.new(PREVIEW_KEY)
     preview.image_size = (width, height)
     preview.image_pixels_float.foreach_set(pixels)
+    _previews["first_view"] = first_view
 
 
 def preview_icon() -> int:
@@ -207,9 +249,16 @@ def preview_icon() -> int:
     return preview.icon_id if preview is not None else 0
 
 
+def preview_caption() -> str:
+    """What the preview image shows: the first view of its run, the view the Orientation angle is measured in."""
+    shown = _previews.get("first_view")
+    return f"First view: {shown}; the Orientation angle is measured here" if shown else ""
+
+
 def release_previews() -> None:
     """Free the preview images (at unregister)."""
     collection = _previews.pop("collection", None)
+    _previews.pop("first_view", None)
     if collection is not None:
         bpy.utils.previews.remove(collection)
 
@@ -222,6 +271,7 @@ class TransferRun:
     kind: str
     object_name: str
     result_mode: str = "NEW"
+    first_view: str = ""
     shown_preview: str | None = None
     cancel_requested: bool = False
     result_name: str | None = None
@@ -240,6 +290,8 @@ class TransferRun:
         if obj is None:
             raise RunError("select a Gaussian splat object (import a .ply first)")
         settings = context.scene.gt2gs
+        if kind == "transfer":
+            gpu_preset_check(context, overrides.get("preset") or settings.preset)
         job = Job(deps_dir=addon.deps_dir())
         try:
             from ..core.scene.ply_write import write_ply
@@ -268,7 +320,7 @@ class TransferRun:
             if isinstance(exc, (splats.SplatObjectError, OSError, ValueError)):
                 raise RunError(str(exc)) from None
             raise
-        run = cls(job, kind, obj.name, settings.result_mode)
+        run = cls(job, kind, obj.name, settings.result_mode, first_view_label(context))
         ACTIVE[kind] = run
         return run
 
@@ -276,10 +328,10 @@ class TransferRun:
         """Poll the worker, show a new preview frame, apply the result once it is done."""
         status = self.job.poll()
         if status.preview and status.preview != self.shown_preview and os.path.isfile(status.preview):
-            show_preview(status.preview)
+            show_preview(status.preview, self.first_view)
             self.shown_preview = status.preview
         if status.state == DONE and self.kind == "preview" and self.shown_preview != status.output:
-            show_preview(status.output)
+            show_preview(status.output, self.first_view)
             self.shown_preview = status.output
         if status.state == DONE and self.kind == "transfer" and self.result_name is None:
             try:
@@ -302,6 +354,7 @@ class TransferRun:
             outcome = Outcome(CANCELLED, "cancelled; the scene is unchanged", seconds=seconds)
         else:
             outcome = Outcome(ERROR, status.error or "the transfer failed", seconds=seconds)
+        outcome.mode = self.result_mode
         if ACTIVE.get(self.kind) is self:
             del ACTIVE[self.kind]
         OUTCOMES[self.kind] = outcome

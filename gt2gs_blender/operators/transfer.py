@@ -17,6 +17,7 @@ from bpy.props import FloatProperty, IntProperty, StringProperty
 from ..blender import transfer_run
 from ..blender.job import DONE, RUNNING
 from ..core.transfer.presets import PRESETS
+from . import machine
 
 TIMER_S = 0.25
 HEADLESS_TICK_S = 0.1
@@ -105,6 +106,8 @@ def _print_progress(status, shown: tuple | None) -> tuple | None:
 def _end(op, run: transfer_run.TransferRun) -> set[str]:
     """Clean up, report the outcome, and the operator's return value for it."""
     outcome = run.finish()
+    if run.kind == "transfer" and not bpy.app.background:
+        machine.check()  # a first run builds the kernel (and may find weights): the preferences show it
     level = {"DONE": "INFO", "CANCELLED": "WARNING"}.get(outcome.state, "ERROR")
     what = "Texture transfer" if run.kind == "transfer" else "Orientation preview"
     op.report({level}, f"{what} {outcome.message}" + (f": {outcome.result}" if outcome.result else ""))

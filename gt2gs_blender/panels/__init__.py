@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import preferences, settings, sidebar, transfer_panel
+from . import preferences, result, sections, settings, sidebar, transfer_panel
 
-_group = ModuleGroup((settings, sidebar, transfer_panel, preferences))
+_group = ModuleGroup((settings, sidebar, transfer_panel, sections, result, preferences))
 register = _group.register
 unregister = _group.unregister

@@ -12,9 +12,17 @@ from bpy.props import BoolProperty, EnumProperty, PointerProperty, StringPropert
 
 from ..blender import properties, splats
 from ..core.transfer.config import IN_SCENE
-from ..core.transfer.presets import DEFAULT_PRESET, PRESET_HELP, PRESETS
+from ..core.transfer.presets import DEFAULT_PRESET, GPU_PRESETS, PRESET_HELP, PRESETS
 
-PRESET_ITEMS = [(name, name.replace("-", " ").title(), PRESET_HELP[name]) for name in PRESETS]
+
+def preset_item(name: str) -> tuple[str, str, str]:
+    """The preset menu's entry for preset ``name``: GPU-only presets say so in their name and tooltip."""
+    if name in GPU_PRESETS:
+        return name, f"{name.replace('-', ' ').title()} (GPU)", f"Needs a CUDA GPU. {PRESET_HELP[name]}"
+    return name, name.replace("-", " ").title(), PRESET_HELP[name]
+
+
+PRESET_ITEMS = [preset_item(name) for name in PRESETS]
 _applying_preset = False
 
 

@@ -110,13 +110,16 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
             obj = bpy.context.active_object
             report["imported"] = [obj.type, len(obj.data.points)]
             report["engine_module"] = [m for m in sys.modules if m.endswith("gt2gs_blender.core.scene.ply")]
-            # the worker process runs from the installed copy (its folder on the worker's PYTHONPATH): given
-            # a "texture" that is no image, it gets as far as decoding it (a real run would also compile
-            # the installed copy's C++ rasterizer, minutes on a busy machine)
+            # a "texture" that is no image is refused before any worker starts
             try:
                 bpy.ops.gt2gs.preview_orientation(texture_path=donut, n_views=2)
             except RuntimeError as exc:
-                report["worker_error"] = str(exc)
+                report["texture_error"] = str(exc)
+        # the worker's Python runs the installed copy (its folder on the worker's PYTHONPATH): the machine
+        # check (a real run would also compile the installed copy's C++ rasterizer, minutes on a busy machine)
+        machine = sys.modules[module + ".blender.machine"]
+        info, error = machine.probe({{"backend": "torch"}}, None)
+        report["probe"] = [error, sorted(info or {{}})]
         addon_utils.disable(module, default_set=True, handle_error=None)
         report["disabled"] = module not in bpy.context.preferences.addons
         report["after_disable"] = [hasattr(bpy.types, c) for c in ("GT2GS_OT_import_ply", "VIEW3D_PT_gt2gs_splat")]
@@ -138,6 +141,9 @@ def test_validate_and_install_then_enable_in_blender(built_zip, tmp_path):
     if DONUT.is_file():
         assert report["imported"] == ["POINTCLOUD", DONUT_COUNT]
         assert report["engine_module"] == ["bl_ext.gt2gs_test.gt2gs_blender.core.scene.ply"]
-        assert "point_cloud.ply" in report["worker_error"] and "texture" in report["worker_error"]
+        expected = f"the texture {DONUT} is not an image file: choose a PNG, JPEG, TIFF, BMP, WebP or EXR picture"
+        assert report["texture_error"].strip() == f"Error: {expected}"
+    error, keys = report["probe"]
+    assert error is None and {"weights", "rasterizer", "compiler", "cuda", "kernel_cache"} <= set(keys)
     assert report["disabled"]
     assert report["after_disable"] == [False, False]

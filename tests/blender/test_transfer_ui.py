@@ -12,6 +12,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,13 +21,14 @@ bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.app import deps
 from gt2gs_blender.app.images import write_png
-from gt2gs_blender.blender import splats, transfer_run, views
+from gt2gs_blender.blender import machine, splats, transfer_run, views
 from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
 from gt2gs_blender.blender.transfer_run import eta_text
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
 from gt2gs_blender.core.errors import MEMORY_ADVICE
 from gt2gs_blender.core.scene.ply_write import write_ply
-from gt2gs_blender.panels.transfer_panel import transfer_view
+from gt2gs_blender.panels.result import NO_RUN_TEXT, result_view
+from gt2gs_blender.panels.transfer_panel import NO_WEIGHTS_WARNING, machine_warnings, transfer_view
 
 from ..test_transfer import blob_scene, stripes
 from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit
@@ -120,8 +122,10 @@ def test_transfer_operator_headless_adds_a_new_object(blob, capfd):
     after = snapshot()
     assert all(np.array_equal(after[k], v) for k, v in before.items() if k not in ("objects", "clouds"))
     assert job_folders() == folders
-    view = transfer_view(blob.name, None, transfer_run.OUTCOMES["transfer"])
-    assert view.state == DONE and dict(view.report_rows)["Result"] == "blob GT²"
+    outcome = transfer_run.OUTCOMES["transfer"]
+    view = transfer_view(blob.name, None, outcome)
+    rows = dict(result_view(outcome, view.message, view.icon).rows)
+    assert view.state == DONE and rows["Result"] == "new object 'blob GT²' in 'Scene Collection'"
 
 
 def test_transfer_in_place_replaces_the_splats(blob):
@@ -339,15 +343,31 @@ def test_transfer_view_in_each_state():
         "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
         "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81},
     }
-    done = transfer_view("donut", None, transfer_run.Outcome(DONE, "done in 15 s", report, "donut GT²", 15.2))
-    rows = dict(done.report_rows)
+    outcome = transfer_run.Outcome(DONE, "done in 15 s", report, "donut GT²", 15.2, mode="IN_PLACE")
+    done = transfer_view("donut", None, outcome)
+    rows = dict(result_view(outcome, done.message, done.icon).rows)
     assert done.state == DONE and done.message == "Done in 15 s" and done.progress is None
     assert rows["Time"] == "15 s (texture transfer 12 s)"  # the wait the user saw, beside the engine's part
-    assert rows["Result"] == "donut GT²" and rows["Splats"] == "45,624" and rows["Views"] == "8 at 128×128"
-    assert rows["Texture Match"] == "0.300 → 0.200" and rows["Features"] == "vgg19_norm_relu3"
-    error = transfer_view("donut", None, transfer_run.Outcome(ERROR, "the worker process exited with status 1"))
-    assert error.state == ERROR and error.icon == "ERROR" and error.can_transfer and not error.report_rows
+    assert rows["Result"] == "'donut GT²' (no longer in the file)" and rows["Splats"] == "45,624"
+    assert rows["Views"] == "8 at 128×128" and rows["Shape Kept (SSIM)"] == "0.810"
+    assert rows["Texture Match"] == "0.300 → 0.200" and rows["Weights"] == "vgg19_norm_relu3"
+    assert result_view(None, "", "").message == NO_RUN_TEXT
+    error_outcome = transfer_run.Outcome(ERROR, "the worker process exited with status 1")
+    error = transfer_view("donut", None, error_outcome)
+    assert error.state == ERROR and error.icon == "ERROR" and error.can_transfer
     assert error.message == "Failed: the worker process exited with status 1"
+    assert not result_view(error_outcome, error.message, error.icon).rows
+    # no weights: a warning box before any run; no CUDA with a GPU-only preset: Transfer disabled, and why
+    fallback = machine.MachineState(info={"cuda": False, "weights": {"fallback": True}})
+    no_weights = transfer_view("donut", None, None, warnings=machine_warnings(fallback))
+    assert no_weights.can_transfer and no_weights.warnings == [NO_WEIGHTS_WARNING]
+    blocker = machine.gpu_problem("paper-360", "auto", fallback)
+    no_cuda = transfer_view("donut", None, None, blocker=blocker)
+    assert not no_cuda.can_transfer and "needs" not in blocker and "no CUDA GPU was found" in no_cuda.warnings[0]
+    assert machine.gpu_problem("fast", "auto", fallback) is None
+    assert machine.gpu_problem("paper-llff", "auto", machine.MachineState()) is None  # not known yet
+    assert "Device preference is CPU" in machine.gpu_problem("paper-llff", "cpu", machine.MachineState())
+    assert machine.gpu_problem("paper-llff", "auto", machine.MachineState(info={"cuda": True})) is None
     assert transfer_view("donut", None, transfer_run.Outcome(CANCELLED, "cancelled")).icon == "CANCEL"
     assert eta_text(None) == "" and eta_text(5) == "ETA 0:05"
 
@@ -457,3 +477,178 @@ def test_the_orientation_is_an_angle_property_in_degrees_for_the_engine(fresh):
     assert prop.subtype == "ANGLE"
     fresh.context.scene.gt2gs.angle = math.radians(-42.5)
     assert transfer_run.config_overrides(fresh.context, {})[1]["angle"] == -42.5
+
+
+def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
+    from gt2gs_blender.core.transfer.config import IN_SCENE, PARTS, user_settings
+    from gt2gs_blender.panels import sections
+
+    assert set(PARTS) <= set(sections.SECTION_OF_PART) and sections.section_of("a new part") == "Advanced"
+    listed = [name for s in sections.SECTIONS for _, names in sections.section_settings(s) for name in names]
+    listed += [name for section in sections.SECTIONS for name in sections.front_settings(section)]
+    assert sorted(listed) == sorted(name for name, _, _ in user_settings(IN_SCENE))  # each exactly once
+    assert {"texture", "gt2"} == set(dict(sections.section_settings("Texture")))  # by part: new ones join
+    labels = [cls.bl_label for cls in sections.classes]
+    assert labels == ["Texture", "Views", "Quality", "Advanced"]
+    assert all(hasattr(fresh.types, cls.__name__) for cls in sections.classes)
+    assert hasattr(fresh.types, "VIEW3D_PT_gt2gs_result")
+
+
+def test_automatic_settings_show_the_value_a_run_uses():
+    from gt2gs_blender.panels.sections import effective_text
+
+    assert effective_text("depth_ratio", 0.0) == "Uses measured from the views, at most 2×"
+    assert effective_text("depth_ratio", 2.0) is None
+    assert effective_text("match_channels", 0) == "Uses all channels of the feature network"
+    assert effective_text("threads", 0, {"threads": 6}) == "Uses 6 (one per physical core)"
+    assert effective_text("plateau_window", 0) == "Uses every step of every phase"
+    assert effective_text("dedup_threshold", 0.0) == "Uses every texture bank entry kept"
+    assert effective_text("gpb", False) is None and effective_text("seed", 0) is None  # 0 is a value there
+
+
+def test_texture_thumbnail_leaves_no_image_datablock(blob, inputs):
+    from gt2gs_blender.blender import textures
+
+    settings = bpy.context.scene.gt2gs
+    images = len(bpy.data.images)
+    preview = textures.thumbnail(settings)
+    assert preview is not None and max(preview.image_size) > 0 and len(bpy.data.images) == images
+    assert textures.thumbnail(settings) == preview  # loaded once, not at every redraw
+    settings.texture_source = "IMAGE"
+    assert textures.thumbnail(settings) is None
+    settings.texture_image = bpy.data.images.new("tex", 8, 8)
+    assert textures.thumbnail(settings) is not None
+
+
+def test_undecodable_texture_is_refused_before_the_worker_starts(blob, tmp_path):
+    from gt2gs_blender.blender.textures import texture_problem
+
+    folders, images = job_folders(), len(bpy.data.images)
+    text = tmp_path / "notes.jpg"
+    text.write_text("not a picture")
+    with pytest.raises(RuntimeError, match=f"the texture {text} is not an image file: choose a PNG, JPEG"):
+        bpy.ops.gt2gs.transfer_texture(texture_path=str(text))
+    damaged = tmp_path / "damaged.png"
+    damaged.write_bytes(b"\x89PNG\r\n\x1a\n" + b"\x00" * 40)
+    with pytest.raises(RuntimeError, match=f"the texture {damaged} is a damaged PNG file"):
+        bpy.ops.gt2gs.preview_orientation(texture_path=str(damaged))
+    assert job_folders() == folders and not transfer_run.ACTIVE and len(bpy.data.images) == images
+    assert texture_problem(str(bpy.context.scene.gt2gs.texture_path)) is None
+
+
+def test_gpu_only_presets_are_marked_and_refused_without_cuda(blob, monkeypatch):
+    from gt2gs_blender.core.transfer.presets import GPU_PRESETS
+    from gt2gs_blender.panels.settings import PRESET_ITEMS
+
+    marked = {name for name, label, _ in PRESET_ITEMS if label.endswith("(GPU)")}
+    assert marked == GPU_PRESETS == {"paper-llff", "paper-360"}
+    monkeypatch.setattr(machine, "_state", machine.MachineState(info={"cuda": False}))
+    folders = job_folders()
+    with pytest.raises(RuntimeError, match="'paper-llff' preset is the paper's schedule for a CUDA GPU"):
+        bpy.ops.gt2gs.transfer_texture(preset="paper-llff")
+    assert job_folders() == folders and not transfer_run.ACTIVE
+
+
+def test_machine_check_runs_in_the_workers_python(fresh, tmp_path, monkeypatch):
+    """The preferences' machine box from a real check: weights, rasterizer, compiler, CUDA, kernel cache."""
+    from gt2gs_blender.panels.preferences import machine_rows, weights_offer
+
+    empty = tmp_path / "no_weights"
+    empty.mkdir()
+    monkeypatch.setenv("GT2GS_WEIGHTS_DIR", str(empty))
+    monkeypatch.setenv("TORCH_HOME", str(empty))
+    monkeypatch.setattr(machine, "_state", machine.MachineState())
+    assert machine_rows(machine.current()) == [("Machine", "not checked yet", "INFO")]
+    info, error = machine.probe({"backend": "torch"}, None)
+    assert error is None and info is machine.current().info and info["threads"] >= 1
+    rows = {label: value for label, value, _ in machine_rows(machine.current())}
+    assert rows["Weights"].startswith("none found: a RANDOM network")
+    assert rows["Rasterizer"] == "portable torch (chosen in the preferences)"
+    assert rows["CUDA"].startswith("not found" if not info["cuda"] else info["cuda_device"])
+    assert rows["Kernel Cache"].startswith(info["kernel_cache"]) and rows["C++ Compiler"] == (
+        info["compiler"] or "not found"
+    )
+    offer, advice = weights_offer(machine.current(), online=True)
+    assert offer and "https://download.pytorch.org/models/vgg16-397923af.pth" in advice
+    offer, advice = weights_offer(machine.current(), online=False)
+    assert not offer and advice.startswith("Allow Online Access") and "vgg16-397923af.pth" in advice
+    assert machine_warnings(machine.current()) == [NO_WEIGHTS_WARNING]
+    monkeypatch.setenv("GT2GS_WEIGHTS_DIR", str(SHARED / "weights"))
+    if (SHARED / "weights" / "vgg19_normalised_to_relu3_1.pth").is_file():
+        machine.probe({}, None)
+        weights = {label: value for label, value, _ in machine_rows(machine.current())}["Weights"]
+        assert weights.startswith("vgg19_norm_relu3 from ") and weights_offer(machine.current(), True) == (False, "")
+
+
+def test_first_compile_of_the_kernel_is_a_progress_stage(monkeypatch):
+    from gt2gs_blender.app import worker
+    from gt2gs_blender.core.render import cpu_backend, kernel_cache
+    from gt2gs_blender.core.transfer.presets import preset
+
+    built, events = [], []
+    monkeypatch.setattr(kernel_cache, "is_built", lambda: bool(built))
+    monkeypatch.setattr(cpu_backend, "load_kernel", lambda: built.append(True))
+    worker._prepare_kernel(preset("fast", device="cpu"), events.append, lambda: False)
+    assert built and [e.stage for e in events] == ["compile", "compile"] and "first run" in events[-1].message
+    worker._prepare_kernel(preset("fast", device="cpu"), events.append, lambda: False)  # built: no stage
+    worker._prepare_kernel(preset("fast", backend="torch"), events.append, lambda: False)
+    assert len(events) == 2 and len(built) == 1
+    status = JobStatus(state=RUNNING, stage="compile", fraction=0.0)
+    assert transfer_view("blob", status, None).progress_text == "Compiling the CPU rasterizer (first run only) · 0%"
+
+
+def test_orientation_preview_names_the_first_view(blob):
+    assert bpy.ops.gt2gs.preview_orientation(n_views=2) == {"FINISHED"}
+    assert transfer_run.preview_caption() == (
+        "First view: automatic view 1, in front (Blender's Front view, from -Y), 20° above; "
+        "the Orientation angle is measured here"
+    )
+    scene = bpy.context.scene
+    for name in ("B cam", "A cam"):
+        scene.collection.objects.link(bpy.data.objects.new(name, bpy.data.cameras.new(name)))
+    scene.gt2gs.view_source = "SCENE_CAMERAS"
+    assert transfer_run.first_view_label(bpy.context) == "camera 'A cam' (first by name)"
+
+
+class RecordingLayout:
+    """A stand-in for a panel's UILayout that records what ``draw`` lays out and checks every property and
+    operator it names exists."""
+
+    def __init__(self, shown: list) -> None:
+        self.shown = shown
+
+    def __getattr__(self, name: str):
+        def call(*args, **kwargs):
+            if name == "prop":
+                assert hasattr(args[0], args[1]), args[1]
+                self.shown.append(args[1])
+            elif name == "operator":
+                module, operator = args[0].split(".")
+                assert hasattr(bpy.types, f"{module.upper()}_OT_{operator}"), args[0]
+                self.shown.append(args[0])
+            elif name == "label":
+                self.shown.append(kwargs.get("text", ""))
+            return RecordingLayout(self.shown)
+
+        return call
+
+
+def draw_panel(cls, context) -> list:
+    shown: list = []
+    cls.draw(SimpleNamespace(layout=RecordingLayout(shown)), context)
+    return shown
+
+
+def test_every_panel_draws_what_its_functions_say(blob):
+    from gt2gs_blender.panels import result, sections, transfer_panel
+
+    context = bpy.context
+    main = draw_panel(transfer_panel.VIEW3D_PT_gt2gs_transfer, context)
+    assert "gt2gs.transfer_texture" in main and transfer_panel.current_view(context).message in main
+    texture = draw_panel(sections.classes[0], context)
+    assert texture[:2] == ["texture_source", "texture_path"] and "angle" in texture and "n_angles" in texture
+    views_shown = draw_panel(sections.classes[1], context)
+    assert views_shown[:2] == ["view_source", "n_views"]
+    advanced = draw_panel(sections.classes[3], context)
+    assert "dedup_threshold" in advanced and "Uses every texture bank entry kept" in advanced
+    assert draw_panel(result.VIEW3D_PT_gt2gs_result, context) == [result.NO_RUN_TEXT]
