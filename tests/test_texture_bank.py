@@ -85,10 +85,11 @@ def test_labels_scales_and_counts():
     labels = {(int(k), float(t)) for k, t in zip(bank.k, bank.theta, strict=True)}
     assert labels == {(k, float(t)) for k in range(3) for t in range(0, 360, 45)}
     assert all(int((bank.k == k).sum()) == 32 for k in range(3))
-    # heights 128, 85, 64 -> crops 96/1.41 -> 80, 60 -> 48, 45 -> 32 (multiples of 16), batched <= 3 at 80^2
+    # heights 128, 85, 64 -> crops 96/1.41 -> 80, then 48 and 32 (multiples of 16) are below 64 px:
+    # those scales are tiled and cut at 64; batched <= 3 at 80^2
     sides = [s[-1] for s in spy.shapes]
-    expected = [crop_side(128, 149), crop_side(85, 99), crop_side(64, 75)]
-    assert sorted(set(sides), reverse=True) == expected == [80, 48, 32]
+    expected = [crop_side(128, 149), 64]
+    assert sorted(set(sides), reverse=True) == expected == [80, 64]
     assert max(s[0] for s in spy.shapes if s[-1] == 80) == 3 and sum(s[0] for s in spy.shapes) == 24
 
 
@@ -216,7 +217,7 @@ def test_corrupt_cache_is_rebuilt_with_a_warning(tmp_path, caplog):
     assert torch.equal(build_texture_bank(texture, lambda x: 1 / 0, **kwargs).features, good.features)
 
 
-def test_progress_is_reported_and_a_too_small_texture_is_a_clear_error():
+def test_progress_is_reported_and_too_many_cells_are_a_clear_error():
     seen: list[float] = []
     build_texture_bank(
         noise_texture(),
@@ -230,9 +231,13 @@ def test_progress_is_reported_and_a_too_small_texture_is_a_clear_error():
         progress=seen.append,
     )
     assert seen == sorted(seen) and seen[-1] == pytest.approx(1.0) and len(seen) == 10
+    small = build_texture_bank(
+        noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=1, n_angles=2, texture_height=40, cells=8
+    )
+    assert len(small) == 2 * 8 * 8  # a 40 px texture is tiled up to a 64 px crop, not refused
     with pytest.raises(GT2GSError, match="too small for the feature bank"):
         build_texture_bank(
-            noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=1, n_angles=2, texture_height=40, cells=8
+            noise_texture(), OrientedEnergy(), extractor_id="toy", n_scales=1, n_angles=2, texture_height=40, cells=80
         )
 
 

@@ -96,11 +96,36 @@ class TransferConfig:
         max=1.0,
     )
     # -- texture
+    layout: bool = setting(
+        False,
+        "Lay Out Texture",
+        "Lay the texture on the object before optimising (a box projection at the set size and angle), "
+        "so planks, bricks and cells show; off: start from the object's own colours, as the paper does",
+        "texture",
+    )
+    texture_repeats: float = setting(
+        0.0,
+        "Texture Repeats",
+        "How many times the texture repeats across the object; 0: use Texture Size in pixels instead",
+        "texture",
+        min=0.0,
+        soft_max=12.0,
+    )
+    split_size: float = setting(
+        0.04,
+        "Split Splats Above",
+        "Laying out the texture splits splats larger than this share of one texture repeat, so the "
+        "texture's lines can run between them; 0: never split",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
     texture_height: int = setting(
         256,
         "Texture Size",
         "Height of the texture on the nearest surfaces, in pixels of the view at half the "
-        "working resolution (as the feature network sees it); smaller repeats the pattern more often",
+        "working resolution (as the feature network sees it), when Texture Repeats is 0; smaller "
+        "repeats the pattern more often",
         "texture",
         unit="px",
         min=8,
@@ -434,6 +459,10 @@ class TransferConfig:
             raise ValueError(f"depth_ratio must be 0 (measured) or 1..16, got {self.depth_ratio}")
         if self.threads < 0:
             raise ValueError(f"threads must be >= 0 (0 = one per physical core), got {self.threads}")
+        if self.texture_repeats < 0 or not 0.0 <= self.split_size <= 1.0:
+            raise ValueError(
+                f"need texture_repeats >= 0 and 0 <= split_size <= 1, got {self.texture_repeats}, {self.split_size}"
+            )
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         for name in ("device", "features", "backend"):

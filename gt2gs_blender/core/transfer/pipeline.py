@@ -28,6 +28,7 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
+from .layout import lay_out, layout_frame, texture_height_for
 from .region import assemble, region_mask, structure_changed, stylise_start
 from .skips import Plateau, redundant_views
 from .stylise import Styliser, StyliseStats, ViewTargets, order_and_link
@@ -183,6 +184,15 @@ def _transfer(
         else []
     )
     used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content
+    n_work = len(work)
+    laid_out = None
+    if config.layout or config.texture_repeats > 0:
+        frame = layout_frame(work if region is None else work.subset(region), content, config)
+        if config.texture_repeats > 0:
+            config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
+        if config.layout:
+            work, region = lay_out(work, region, content, image, frame, config)
+            laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": len(work) - n_work}
     targets = view_targets(used, work, extractor, config, config.backend)
     tracker.end()
 
@@ -206,7 +216,7 @@ def _transfer(
     if config.color_transfer:
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
-    work = assemble(work, restyled, start, selected, hidden, structure_changed(stats))
+    work = assemble(work, restyled, start, selected, hidden, structure_changed(stats) or len(work) != n_work)
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
         metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
@@ -224,6 +234,7 @@ def _transfer(
         "bank_rows_matched": len(matching),
         "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
         "dropped_views": dropped,
+        "layout": laid_out,
         "plateau_skipped": dict(stats.plateau_skipped),
     }
     tracker.tell(1, 1, "done")

@@ -55,7 +55,11 @@ log = logging.getLogger(__name__)
 Extractor = Callable[[torch.Tensor], torch.Tensor]
 """(B,3,H,W) RGB in [0,1] -> (B,C,h,w) features."""
 
-CACHE_SCHEMA = 1
+MIN_CROP = 64
+"""A scaled texture whose crop would be smaller than this (or than the cap) is tiled up to it: 8 cells
+plus the network's context (schema 2; schema 1 reflected the border and refused tiny textures)."""
+
+CACHE_SCHEMA = 2
 """Bumped whenever the bank's content for the same settings changes; old cache files then miss."""
 
 CROP_MULTIPLE = 16
@@ -272,6 +276,17 @@ def crop_side(height: int, width: int, max_crop: int | None = None) -> int:
     return side - side % CROP_MULTIPLE if side >= CROP_MULTIPLE else side
 
 
+def tiled_for_crop(image: np.ndarray, side: int) -> np.ndarray:
+    """``image`` repeated an odd number of times each way (its centre stays the centre) until a
+    ``side`` px crop fits inside it under any rotation: a texture scaled small for a far depth group
+    or a small object is still a repeating pattern, and its few pixels would give too few feature cells."""
+    need = math.ceil(side * math.sqrt(2.0)) + 1
+    reps = [1 + 2 * math.ceil(max(0, need - n) / (2 * n)) for n in image.shape[:2]]
+    if reps == [1, 1]:
+        return image
+    return np.tile(image, (reps[0], reps[1], 1))
+
+
 def rotate_crop(image: np.ndarray, angle: float, side: int) -> np.ndarray:
     """The ``side`` x ``side`` centre of ``image`` rotated ``angle`` degrees counter-clockwise on screen."""
     h, w = image.shape[:2]
@@ -296,6 +311,9 @@ def _rotated_features(
 
     A capped crop is cut from the full one, so its pixels are exactly the full crop's (OpenCV
     quantises sampling positions differently for different output placements)."""
+    limit = max_crop or MIN_CROP
+    if crop_side(*image.shape[:2]) < limit:  # a small scale: repeat the pattern rather than lose cells
+        image, max_crop = tiled_for_crop(image, limit), limit
     full = crop_side(*image.shape[:2])
     side = crop_side(*image.shape[:2], max_crop)
     margin = (full - side) // 2

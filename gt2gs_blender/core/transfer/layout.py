@@ -1,0 +1,283 @@
+"""The texture laid on the object before the optimisation: the structure (planks, bricks, cells) a
+feature loss with a receptive field of ~24 px cannot build from the original colours at CPU budgets.
+
+The layout is a box (tri-planar) projection in the world, the 3D form of GT²'s geometry-aware
+scale and orientation: one texture size in the world whatever the view's depth, and one layout
+every view agrees on.
+- Frame: ``up`` is the views' mean up direction (an orbit's world up, a capture's camera up);
+  ``right`` the first view's right made orthogonal to it; ``depth`` completes the frame. A surface
+  facing ``depth`` shows the texture as the first view shows it, rotated by the start angle.
+- Size: the texture's height spans ``object size / repeats`` in the world, the object's size being
+  its visible centres' extent along ``right`` and ``up`` (2nd to 98th percentile).
+- Normals come from the views' rendered depth (blurred, so sprinkles and specks do not flip the
+  plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
+  sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
+  scale axis of a 3DGS splat is a poor normal (a third within 25° of the surface's on the donut).
+- Splats coarser than the texture's detail are split 2 x 2 in the plane of their two largest axes
+  (children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
+  edge can lie between splats; the correction phases then restore the geometry under the original
+  colours.
+- Each splat samples the texture prefiltered to its own footprint (no aliasing of thin mortar
+  lines into specks), the three planes blended by the normal's components to the 8th power.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from ..cameras.camera import Camera
+from ..cameras.warp import backproject, expected_depth, reproject
+from ..errors import GT2GSError
+from ..features.specs import RENDER_SCALE
+from ..scene.gaussians import GaussianScene, concat, quats_to_rotmats
+from ..scene.inria import SH_C0
+from .config import TransferConfig
+from .views import ViewSet
+
+SURFACE_ALPHA = 0.9
+"""Pixels at least this opaque carry a surface normal."""
+NORMAL_BLUR_PX = 3.0
+"""Gaussian blur (pixels) of the depth before differencing: normals of the surface, not of its specks."""
+DEPTH_TOLERANCE = 0.03
+"""A splat is on the surface a pixel shows when its depth is within this fraction of the pixel's."""
+BLEND_POWER = 8.0
+"""Tri-planar blend weights |n_i|^p: sharp transitions (little ghosting) that still blend at 45°."""
+SPLIT_OFFSET = 0.8
+"""Children sit at +-0.8 sigma along the parent's two largest axes ..."""
+SPLIT_SHRINK = 0.6
+"""... with 0.6 of its scale there: 0.8^2 + 0.6^2 = 1 keeps the parent's second moment."""
+SPLIT_PASSES = 3
+"""At most three 2 x 2 splits (64 children) per splat."""
+PREFILTER = 0.5
+"""A splat samples the texture blurred by half its largest sigma (in texture pixels)."""
+MIN_TEXTURE_HEIGHT = 8
+"""The smallest texture height the bank is built at (the config's own minimum)."""
+EXTENT_QUANTILE = 0.02
+"""The object's size ignores the 2 % outermost centres on each side (strays, floaters)."""
+
+
+@dataclass(frozen=True)
+class LayoutFrame:
+    """The box projection's axes (rows: right, up, depth) and the world size of one texture height."""
+
+    axes: np.ndarray
+    repeat: float
+
+
+def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -> LayoutFrame:
+    """The layout's frame for the run's views (the first is the angle's reference): ``texture_repeats``
+    texture heights across the object, or with 0 the size ``texture_height`` gives the nearest surfaces."""
+    cameras = views.cameras
+    up = -np.mean([c.world_to_cam[1, :3] for c in cameras], axis=0)
+    if np.linalg.norm(up) < 1e-6:  # views all around a horizontal axis: the first view's own up
+        up = -cameras[0].world_to_cam[1, :3]
+    up = up / np.linalg.norm(up)
+    first_right = cameras[0].world_to_cam[0, :3]
+    right = first_right - (first_right @ up) * up
+    if np.linalg.norm(right) < 1e-6:  # the first view looks along the up direction
+        right = np.cross(up, cameras[0].world_to_cam[2, :3])
+    right = right / np.linalg.norm(right)
+    depth = np.cross(right, up)
+    if depth @ cameras[0].world_to_cam[2, :3] < 0:
+        depth = -depth
+    axes = np.stack([right, up, depth])
+    if config.texture_repeats <= 0:
+        repeat = config.texture_height / RENDER_SCALE * _nearest_depth(views, config.n_scales) / cameras[0].fy
+        return LayoutFrame(axes=axes, repeat=repeat)
+    coords = scene.means.detach().double().cpu() @ torch.from_numpy(axes[:2]).T
+    q = torch.tensor([EXTENT_QUANTILE, 1.0 - EXTENT_QUANTILE], dtype=torch.float64)
+    lohi = torch.quantile(coords, q, dim=0)
+    size = float((lohi[1] - lohi[0]).max())
+    return LayoutFrame(axes=axes, repeat=max(size, 1e-12) / config.texture_repeats)
+
+
+def texture_height_for(frame: LayoutFrame, views: ViewSet, n_scales: int) -> int:
+    """The bank's texture height (pixels at the feature network's scale) that shows the layout's
+    world size on the nearest depth group's surfaces, so the loss refines the texture at the size it lies."""
+    pixels = frame.repeat * views.cameras[0].fy / _nearest_depth(views, n_scales) * RENDER_SCALE
+    return max(MIN_TEXTURE_HEIGHT, round(pixels))
+
+
+def _nearest_depth(views: ViewSet, n_scales: int) -> float:
+    """The depth of the nearest depth group's centre over all views (texture_bank.depth_groups' bins)."""
+    z = torch.cat([expected_depth(d, a, SURFACE_ALPHA)[a >= SURFACE_ALPHA] for d, a in zip(views.depths, views.alphas)])
+    if not len(z):
+        raise GT2GSError("no view sees the object: nothing to lay the texture on")
+    lo, hi = float(z.min()), float(z.max())
+    return max(lo + 0.5 * (hi - lo) / max(n_scales, 1), 1e-12)
+
+
+def split_coarse(scene: GaussianScene, max_sigma: float, max_count: int) -> tuple[GaussianScene, torch.Tensor]:
+    """Split splats whose largest sigma exceeds ``max_sigma`` 2 x 2 in their plane, up to
+    ``SPLIT_PASSES`` times and while the scene stays within ``max_count`` splats (largest first).
+
+    Returns the scene (unsplit splats first, in order, then the children) and each row's source row."""
+    source = torch.arange(len(scene), device=scene.device)
+    for _ in range(SPLIT_PASSES):
+        largest = scene.scales.detach().max(dim=1).values
+        coarse = largest > max_sigma
+        room = (max_count - len(scene)) // 3
+        if room <= 0 or not bool(coarse.any()):
+            break
+        if int(coarse.sum()) > room:  # the largest first, exactly ``room`` of them whatever the ties
+            coarse = torch.zeros_like(coarse).index_fill_(0, torch.topk(largest, room).indices, True)
+        children, parents = _split_2x2(scene.subset(coarse)), coarse.nonzero().squeeze(1)
+        scene = concat([scene.subset(~coarse), children])
+        source = torch.cat([source[~coarse], source[parents].repeat(4)])
+    return scene, source
+
+
+def _split_2x2(parents: GaussianScene) -> GaussianScene:
+    """Four children per parent, in the plane of its two largest axes (module notes)."""
+    scales = parents.scales.detach()
+    rot = quats_to_rotmats(parents.rotations.detach())
+    order = scales.argsort(dim=1, descending=True)
+    rows = torch.arange(len(parents), device=parents.device)
+    first = rot[rows, :, order[:, 0]] * scales[rows, order[:, 0]][:, None]
+    second = rot[rows, :, order[:, 1]] * scales[rows, order[:, 1]][:, None]
+    shrink = torch.zeros_like(scales)
+    shrink[rows, order[:, 0]] = math.log(SPLIT_SHRINK)
+    shrink[rows, order[:, 1]] = math.log(SPLIT_SHRINK)
+    kids = []
+    for a, b in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
+        offset = SPLIT_OFFSET * (a * first + b * second)
+        kids.append(replace(parents, means=parents.means + offset, log_scales=parents.log_scales + shrink))
+    return concat(kids)
+
+
+@torch.no_grad()
+def surface_normals(
+    scene: GaussianScene, cameras: Sequence[Camera], depths: Sequence[torch.Tensor], alphas: Sequence[torch.Tensor]
+) -> torch.Tensor:
+    """(N, 3) unit normal per splat from the views' rendered depth (module notes)."""
+    n = len(scene)
+    best = torch.full((n,), -1.0, dtype=torch.float64)
+    normals = torch.zeros(n, 3, dtype=torch.float64)
+    means = scene.means.detach().cpu()
+    for camera, depth, alpha in zip(cameras, depths, alphas):
+        normal_map, facing_map, valid = _normal_map(camera, depth.cpu(), alpha.cpu())
+        uv, z = reproject(means, camera)
+        col, row = uv[:, 0].floor().long(), uv[:, 1].floor().long()
+        inside = (z > 0) & (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height)
+        col, row = col.clamp(0, camera.width - 1), row.clamp(0, camera.height - 1)
+        surface = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA).double()[row, col]
+        seen = inside & valid[row, col] & ((z - surface).abs() <= DEPTH_TOLERANCE * surface)
+        facing = torch.where(seen, facing_map[row, col], torch.full_like(z, -1.0))
+        better = facing > best
+        best = torch.where(better, facing, best)
+        normals[better] = normal_map[row[better], col[better]]
+    return _fill_unseen(means, normals, best >= 0).float().to(scene.device)
+
+
+def _normal_map(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """Per pixel: the unit normal facing the camera (H,W,3), its cosine to the ray (H,W) and
+    whether the pixel and its blurred neighbourhood are opaque surface (H,W)."""
+    covered = (alpha >= SURFACE_ALPHA).double().numpy()
+    z = expected_depth(depth, alpha, SURFACE_ALPHA).double().numpy()
+    weight = cv2.GaussianBlur(covered, (0, 0), NORMAL_BLUR_PX)
+    smooth = cv2.GaussianBlur(z, (0, 0), NORMAL_BLUR_PX) / np.maximum(weight, 1e-6)
+    points = backproject(torch.from_numpy(smooth), camera)
+    dx, dy = torch.zeros_like(points), torch.zeros_like(points)
+    dx[:, 1:-1] = points[:, 2:] - points[:, :-2]
+    dy[1:-1] = points[2:] - points[:-2]
+    normal = F.normalize(torch.cross(dx, dy, dim=-1), dim=-1)
+    to_camera = F.normalize(torch.from_numpy(camera.center) - points, dim=-1)
+    facing = (normal * to_camera).sum(-1)
+    normal = torch.where(facing[..., None] < 0, -normal, normal)
+    valid = torch.from_numpy((covered > 0) & (weight > 0.99)) & (normal.norm(dim=-1) > 0.5)
+    return normal, facing.abs(), valid
+
+
+def _fill_unseen(means: torch.Tensor, normals: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
+    """Normals of splats no view sees, from their nearest seen splat (the view's up when none is seen)."""
+    if bool(seen.all()):
+        return normals
+    if not bool(seen.any()):
+        return torch.tensor([0.0, 0.0, 1.0], dtype=normals.dtype).expand_as(normals).clone()
+    points = means.float().numpy()
+    index = cv2.flann_Index(np.ascontiguousarray(points[seen.numpy()]), dict(algorithm=1, trees=4))
+    nearest, _ = index.knnSearch(np.ascontiguousarray(points[~seen.numpy()]), 1, params=dict(checks=32))
+    filled = normals.clone()
+    filled[~seen] = normals[seen][torch.from_numpy(nearest[:, 0].astype(np.int64))]
+    return filled
+
+
+def layout_colours(
+    scene: GaussianScene, normals: torch.Tensor, texture: np.ndarray, frame: LayoutFrame, angle_deg: float
+) -> torch.Tensor:
+    """(N, 3) RGB in [0, 1] per splat: the texture's box projection in ``frame``, rotated by
+    ``angle_deg`` counter-clockwise as the first view sees it, prefiltered to each splat's footprint."""
+    height = texture.shape[0]
+    world_per_px = frame.repeat / height
+    axes = torch.from_numpy(frame.axes).to(scene.means)
+    local = scene.means.detach() @ axes.T  # (N, 3): right, up, depth
+    facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
+    weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
+    blur = PREFILTER * float(scene.scales.detach().max(dim=1).values.median()) / world_per_px
+    image = cv2.GaussianBlur(texture, (0, 0), blur) if blur > 0.5 else texture
+    planes = (  # (horizontal, vertical) texture axes of the planes facing right, up and depth
+        (local[:, 2], local[:, 1]),
+        (local[:, 0], local[:, 2]),
+        (local[:, 0], local[:, 1]),
+    )
+    colours = torch.zeros(len(scene), 3, dtype=local.dtype, device=local.device)
+    for k, (h, v) in enumerate(planes):
+        colours += weights[:, k : k + 1] * _sample(image, h / world_per_px, -v / world_per_px, angle_deg)
+    return colours.clamp(0.0, 1.0)
+
+
+def _sample(texture: np.ndarray, x: torch.Tensor, y: torch.Tensor, angle_deg: float) -> torch.Tensor:
+    """Bilinear, wrapped samples of ``texture`` at texture-pixel coordinates (x right, y down),
+    the texture turned ``angle_deg`` counter-clockwise on screen (texture_bank's convention)."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    tx, ty = c * x - s * y, s * x + c * y  # the inverse of the on-screen rotation [[c, s], [-s, c]]
+    height, width = texture.shape[:2]
+    grid = torch.stack([torch.remainder(tx, width) / width * 2 - 1, torch.remainder(ty, height) / height * 2 - 1], -1)
+    image = torch.from_numpy(np.ascontiguousarray(texture)).permute(2, 0, 1)[None].to(x)
+    sampled = F.grid_sample(image, grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
+    return sampled[0, :, 0].T
+
+
+def with_colours(scene: GaussianScene, rgb: torch.Tensor, rows: torch.Tensor | None = None) -> GaussianScene:
+    """``scene`` whose DC colour is ``rgb`` (N, 3) (only on ``rows`` when given) and rest bands zero there."""
+    dc = ((rgb - 0.5) / SH_C0).to(scene.sh_dc)
+    if rows is None:
+        return replace(scene, sh_dc=dc, sh_rest=torch.zeros_like(scene.sh_rest))
+    return replace(
+        scene,
+        sh_dc=torch.where(rows[:, None], dc, scene.sh_dc),
+        sh_rest=torch.where(rows[:, None, None], torch.zeros_like(scene.sh_rest), scene.sh_rest),
+    )
+
+
+MAX_GROWTH = 8
+"""Splitting stops when the laid-out splats reach this many times their count."""
+
+
+def lay_out(
+    scene: GaussianScene,
+    rows: torch.Tensor | None,
+    views: ViewSet,
+    texture: np.ndarray,
+    frame: LayoutFrame,
+    config: TransferConfig,
+) -> tuple[GaussianScene, torch.Tensor | None]:
+    """``scene`` with the texture laid on ``rows`` (all when None) in ``frame``, split where coarse
+    (those rows move to the end), and the new rows mask."""
+    part = scene if rows is None else scene.subset(rows)
+    if config.split_size > 0:
+        part, _ = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
+    normals = surface_normals(part, views.cameras, views.depths, views.alphas)
+    part = with_colours(part, layout_colours(part, normals, texture, frame, config.angle))
+    if rows is None:
+        return part, None
+    kept = scene.subset(~rows)
+    mask = torch.cat([torch.zeros(len(kept), dtype=torch.bool), torch.ones(len(part), dtype=torch.bool)])
+    return concat([kept, part]), mask.to(scene.device)

@@ -1,0 +1,204 @@
+"""The texture layout (core/transfer/layout.py) against analytic cases: a plane's normals, the split's
+moments, the projection's period and angle, and the bank's tiling of small textures."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.render import render
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.layout import (
+    layout_colours,
+    layout_frame,
+    split_coarse,
+    surface_normals,
+    texture_height_for,
+)
+from gt2gs_blender.core.transfer.texture_bank import build_texture_bank, crop_side, tiled_for_crop
+from gt2gs_blender.core.transfer.views import render_views
+
+
+def wall(n: int = 60, tilt_deg: float = 0.0) -> GaussianScene:
+    """A flat grey wall of n x n Gaussians 3 units in front of the origin, turned ``tilt_deg`` about y."""
+    coords = torch.linspace(-1.0, 1.0, n)
+    y, x = torch.meshgrid(coords, coords, indexing="ij")
+    t = math.radians(tilt_deg)
+    means = torch.stack([x * math.cos(t), y, 3.0 + x * math.sin(t)], -1).reshape(-1, 3)
+    spacing = float(coords[1] - coords[0])
+    half = torch.tensor([math.cos(t / 2), 0.0, math.sin(t / 2), 0.0])  # (w, x, y, z) about y
+    scene = GaussianScene.from_activated(
+        means,
+        torch.tensor([spacing * 0.7, spacing * 0.7, 1e-3]).expand(n * n, 3),
+        torch.full((n * n,), 0.99),
+        torch.full((n * n, 3), 0.5),
+    )
+    return GaussianScene(
+        means=scene.means,
+        quats=half.expand(n * n, 4).clone(),
+        log_scales=scene.log_scales,
+        opacity_logits=scene.opacity_logits,
+        sh_dc=scene.sh_dc,
+        sh_rest=scene.sh_rest,
+    )
+
+
+def front_camera(size: int = 96) -> Camera:
+    """Looking down +z from the origin (OpenCV axes: x right, y down)."""
+    return Camera.from_cam_to_world(np.eye(3), [0.0, 0.0, 0.0], size * 0.9, size * 0.9, size / 2, size / 2, size, size)
+
+
+@pytest.mark.parametrize("tilt", [0.0, 35.0])
+def test_normals_of_a_wall_are_its_plane_normal(tilt):
+    """Every splat the view sees gets the wall's normal; the rest the nearest seen one's (the same here)."""
+    scene = wall(tilt_deg=tilt)
+    cam = front_camera()
+    out = render(scene, [cam])
+    normals = surface_normals(scene, [cam], [out.depths[0]], [out.alphas[0]])
+    expected = torch.tensor([-math.sin(math.radians(tilt)), 0.0, math.cos(math.radians(tilt))])
+    cosines = (normals @ expected).abs()
+    assert float(torch.quantile(cosines, 0.05)) > math.cos(math.radians(8.0))
+
+
+def test_split_keeps_the_mean_and_the_covariance_in_the_plane():
+    """The 2 x 2 children's mixture has the parent's mean and covariance along its two largest axes."""
+    g = torch.Generator().manual_seed(0)
+    n = 50
+    parent = GaussianScene.from_activated(
+        torch.randn(n, 3, generator=g),
+        torch.rand(n, 3, generator=g) * 0.2 + 0.05,
+        torch.full((n,), 0.7),
+        torch.rand(n, 3, generator=g),
+    )
+    parent = GaussianScene(
+        means=parent.means,
+        quats=torch.randn(n, 4, generator=g),
+        log_scales=parent.log_scales,
+        opacity_logits=parent.opacity_logits,
+        sh_dc=parent.sh_dc,
+        sh_rest=parent.sh_rest,
+    )
+    children, source = split_coarse(parent, max_sigma=0.0, max_count=4 * n)
+    assert len(children) == 4 * n and torch.equal(torch.sort(source).values, torch.arange(n).repeat_interleave(4))
+    rot_p = quats_to_rotmats(parent.rotations)
+    cov_p = rot_p @ torch.diag_embed(parent.scales**2) @ rot_p.transpose(1, 2)
+    rot_c = quats_to_rotmats(children.rotations)
+    cov_c = rot_c @ torch.diag_embed(children.scales**2) @ rot_c.transpose(1, 2)
+    for i in range(n):
+        kids = source == i
+        mean = children.means[kids].mean(0)
+        offsets = children.means[kids] - mean
+        mixture = cov_c[kids].mean(0) + offsets.T @ offsets / 4
+        assert torch.allclose(mean, parent.means[i], atol=1e-5)
+        assert torch.allclose(mixture, cov_p[i], atol=1e-5, rtol=1e-4)
+        assert torch.equal(children.opacity_logits[kids], parent.opacity_logits[i].expand(4))
+
+
+def test_split_stops_at_the_size_and_the_count():
+    """Splits only splats above the size, and never past the count."""
+    scene = wall(n=20)
+    largest = float(scene.scales.max())
+    kept, _ = split_coarse(scene, largest * 2, 10_000)
+    assert len(kept) == len(scene)
+    capped, _ = split_coarse(scene, 0.0, len(scene) + 3 * 50)
+    assert len(scene) < len(capped) <= len(scene) + 3 * 50
+    fine, _ = split_coarse(scene, largest * 0.5, 100_000)
+    assert float(fine.scales.max(dim=1).values.max()) <= largest * 0.5 + 1e-6
+
+
+def stripes(period: int = 32, size: int = 128) -> np.ndarray:
+    """Vertical black and white bars, ``period`` px per pair."""
+    x = np.arange(size)
+    row = ((x // (period // 2)) % 2).astype(np.float32)
+    return np.repeat(np.repeat(row[None, :, None], size, axis=0), 3, axis=2)
+
+
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_layout_lays_the_texture_at_its_repeat_and_angle(angle):
+    """A wall facing the first view shows the bars with the period the repeats ask for, turned by the angle."""
+    scene = wall(n=120)
+    cam = front_camera()
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    config = TransferConfig(texture_repeats=2.0, angle=angle)
+    frame = layout_frame(scene, views, config)
+    assert frame.repeat == pytest.approx(2.0 * 0.96 / 2.0, rel=0.02)  # 2-98 % of a 2-unit wall, twice
+    normals = surface_normals(scene, [cam], views.depths, views.alphas)
+    texture = stripes(period=32, size=128)  # 4 bar pairs per texture height
+    colours = layout_colours(scene, normals, texture, frame, angle).mean(1).reshape(120, 120).numpy()
+    along = colours.mean(0) if angle == 0.0 else colours.mean(1)
+    across = colours.mean(1) if angle == 0.0 else colours.mean(0)
+    spectrum = np.abs(np.fft.rfft(along - along.mean()))
+    period_world = 2.0 / int(np.argmax(spectrum))  # the wall is 2 units across
+    assert period_world == pytest.approx(frame.repeat / 4, rel=0.15)
+    assert across.std() < 0.1 * along.std()  # constant along the bars
+
+
+def test_texture_height_matches_the_repeat_on_screen():
+    """The bank's texture height is the repeat's on-screen size at the feature scale, on the nearest surfaces."""
+    scene = wall(n=60)
+    cam = front_camera()
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    frame = layout_frame(scene, views, TransferConfig(texture_repeats=2.0))
+    height = texture_height_for(frame, views, 1)
+    assert height == pytest.approx(frame.repeat * cam.fy / 3.0 * 0.5, abs=1.5)
+    back = layout_frame(scene, views, TransferConfig(texture_repeats=0.0, texture_height=height))
+    assert back.repeat == pytest.approx(frame.repeat, rel=0.02)
+
+
+def test_small_textures_are_tiled_not_refused():
+    """A texture too small for the bank's crop (the 'too small for the feature bank' crash) is repeated."""
+    small = stripes(period=8, size=24)
+    tiled = tiled_for_crop(small, 64)
+    assert crop_side(*tiled.shape[:2]) >= 64
+    centre = (tiled.shape[0] - 24) // 2, (tiled.shape[1] - 24) // 2
+    assert np.array_equal(tiled[centre[0] : centre[0] + 24, centre[1] : centre[1] + 24], small)
+    assert tiled_for_crop(stripes(size=128), 64) is not None
+    bank = build_texture_bank(
+        small,
+        lambda x: torch.nn.functional.avg_pool2d(x, 4),
+        extractor_id="pool",
+        n_scales=2,
+        n_angles=4,
+        texture_height=20,
+        max_crop=64,
+    )
+    assert len(bank) == 2 * 4 * 64 and torch.isfinite(bank.features).all()
+
+
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_a_transfer_with_the_layout_keeps_the_stripes_period_and_angle(shared, tmp_path, angle):
+    """End to end: bars laid on a wall come out of a (short) transfer at the repeat's period and the angle."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam = wall(n=100), front_camera(96)
+    texture = stripes(period=32, size=128)
+    config = TransferConfig(
+        resolution=96,
+        stylise_steps=20,
+        correct_steps=10,
+        rounds=1,
+        n_scales=1,
+        n_angles=8,
+        layout=True,
+        texture_repeats=2.0,
+        angle=angle,
+        densify=False,
+        evaluate=False,
+        color_transfer=False,
+        weights_path=str(shared / "weights"),
+        cache_dir=str(tmp_path),
+    )
+    result = transfer(scene, texture, [cam], config)
+    assert result.report["skips"]["layout"]["split"] >= 0
+    grey = render(result.scene, [cam], background=torch.ones(3)).colors[0].mean(-1).numpy()[20:-20, 20:-20]
+    along, across = (grey.mean(0), grey.mean(1)) if angle == 0.0 else (grey.mean(1), grey.mean(0))
+    spectrum = np.abs(np.fft.rfft(along - along.mean()))
+    repeat_px = result.report["config"]["texture_height"] / 0.5  # the repeat on screen, in render pixels
+    period_px = len(along) / int(np.argmax(spectrum))
+    assert period_px == pytest.approx(repeat_px / 4, rel=0.2)
+    assert across.std() < 0.25 * along.std()
