@@ -202,3 +202,28 @@ def test_a_transfer_with_the_layout_keeps_the_stripes_period_and_angle(shared, t
     period_px = len(along) / int(np.argmax(spectrum))
     assert period_px == pytest.approx(repeat_px / 4, rel=0.2)
     assert across.std() < 0.25 * along.std()
+
+
+def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
+    """The orientation preview with the layout on shows exactly what a run starts from (no steps)."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+
+    scene, cam = wall(n=80, tilt_deg=20.0), front_camera(96)
+    texture = stripes(period=32, size=128)
+    config = TransferConfig(
+        resolution=96,
+        stylise_steps=0,
+        correct_steps=0,
+        layout=True,
+        texture_repeats=3.0,
+        angle=30.0,
+        color_transfer=False,
+        evaluate=False,
+        weights_path=str(shared / "weights"),
+        cache_dir=str(tmp_path),
+    )
+    started = transfer(scene, texture, [cam], config).scene
+    expected = render(started, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    preview = layout_preview(scene, texture, [cam], config, size=96)
+    assert np.abs(preview.astype(np.float32) - expected).max() <= 1.0

@@ -152,7 +152,7 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
     """Render the orientation preview of the first view as a PNG."""
     from ..core.cameras.generate import auto_views
     from ..core.scene.files import read_scene
-    from ..core.transfer.orientation_preview import orientation_preview
+    from ..core.transfer.orientation_preview import layout_preview, orientation_preview
     from .images import write_png
     from .jobs import read_texture
 
@@ -165,6 +165,17 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
         if isinstance(views, list)
         else auto_views(scene, views or config.n_views, width=spec.preview_size, height=spec.preview_size)[0]
     )
+    if config.layout:
+        cameras = (
+            views
+            if isinstance(views, list)
+            else auto_views(scene, views or config.n_views, width=config.resolution, height=config.resolution)
+        )
+        write_png(
+            spec.output, layout_preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size)
+        )
+        events("done", output=str(spec.output), report=None)
+        return
     image = orientation_preview(
         scene,
         read_texture(spec.texture),

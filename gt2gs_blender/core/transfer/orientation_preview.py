@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 
 import cv2
 import numpy as np
@@ -21,9 +22,11 @@ from ..cameras.camera import Camera
 from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
-from .config import MAX_DEPTH_RATIO
+from .config import MAX_DEPTH_RATIO, TransferConfig
+from .layout import lay_out, layout_frame
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
+from .views import render_views
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -88,3 +91,24 @@ def orientation_preview(
     cover = np.where(covered, alpha, 0.0)[..., None]
     result = laid * shade[..., None] * cover + np.asarray(background, np.float32) * (1.0 - cover)
     return (np.clip(result, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+
+
+@torch.no_grad()
+def layout_preview(
+    scene: GaussianScene,
+    texture: np.ndarray | str | os.PathLike,
+    cameras: Sequence[Camera],
+    config: TransferConfig,
+    *,
+    size: int = 256,
+) -> np.ndarray:
+    """(H, W, 3) uint8: the first of ``cameras`` showing the scene with the texture laid out exactly
+    as a run with ``config`` (``layout`` on) starts from it, before any optimisation."""
+    image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
+    background = torch.tensor(config.background, dtype=scene.dtype)
+    run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
+    views = render_views(scene.detach(), run_cameras, background, config.backend)
+    laid, _ = lay_out(scene.detach(), None, views, image, layout_frame(scene, views, config), config)
+    cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
+    out = render(laid, [cam], background=background, backend=config.backend)
+    return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)

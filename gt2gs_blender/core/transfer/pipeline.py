@@ -187,7 +187,8 @@ def _transfer(
     n_work = len(work)
     laid_out = None
     if config.layout or config.texture_repeats > 0:
-        frame = layout_frame(work if region is None else work.subset(region), content, config)
+        # sized on every selected splat, hidden ones too, as the orientation preview sizes it
+        frame = layout_frame(original if selected is None else original.subset(selected), content, config)
         if config.texture_repeats > 0:
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
