@@ -1,0 +1,326 @@
+"""Issue 19's structure benchmark: would a user recognise the texture on their splat?
+
+``python bench/recognise.py [--scenes donut fern] [--textures NAME ...] [--presets fast] [--set KEY=VALUE ...]
+[--seeds 0] [--tag TAG] [--only-measure]``
+
+For each structured texture and scene, a transfer runs (the named preset plus ``--set`` overrides, each seed);
+the result is rendered from held-out views the transfer never optimised (bench/recognise_scenes.py), and all
+ten shared textures are ranked by a structure-only distance to those renders under two unlike measures
+(bench/recognise_measure.py: VGG-16 relu1_2/relu2_2 Gram matrices and a Gabor bank; grey, on the object's
+pixels, best over texture scales and rotations). Rank 1 = the transferred texture is the closest of the ten.
+
+Calibration, in every run (and alone with ``--only-measure``, seconds per scene): the texture simply projected
+onto the object (``orientation_preview`` at the preset's resolution, texture heights ``--projected-heights``)
+must rank near the top, and the original untransferred scene must not (the null case).
+
+Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
+(rows: textures; columns: texture | projected | original | each result's held-out views). The target the
+engine must meet: top 3 under both measures for at least 5 of the 6 textures on each scene.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from dataclasses import fields
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+sys.path.insert(0, str(ROOT))
+
+import recognise_measure as measure
+from recognise_scenes import BenchScene, load_bench_scene
+
+from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
+from gt2gs_blender.core.transfer.config import _python_type
+from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
+
+SHARED = ROOT.parent / "shared"
+TEXTURES = SHARED / "data" / "textures"
+OUT = ROOT / "bench" / "out" / "recognise"
+STRUCTURED = ("herringbone_wood", "brick_wall", "honeycomb", "toy_bricks", "woven_straw", "green_cells")
+MEASURES = ("gram", "gabor")
+TOP = 3
+NEEDED = 5
+TILE = 160
+SHEET_VIEWS = 2
+"""Held-out views per result on the contact sheet."""
+
+
+# ---------------------------------------------------------------------------------------------------
+# Settings
+# ---------------------------------------------------------------------------------------------------
+def parse_overrides(pairs: list[str]) -> dict[str, Any]:
+    """``name=value`` strings typed by the TransferConfig field they name (the config's own types)."""
+    types = {f.name: f.type for f in fields(TransferConfig)}
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        if not sep or name not in types:
+            raise SystemExit(f"--set {pair!r}: expected NAME=VALUE with NAME one of {', '.join(types)}")
+        annotation = str(types[name])
+        if text == "None" and "None" in annotation:
+            out[name] = None
+            continue
+        kind = _python_type(annotation)
+        if kind is bool:
+            if text.lower() not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
+                raise SystemExit(f"--set {pair!r}: not a yes/no value")
+            out[name] = text.lower() in ("1", "true", "yes", "on")
+        elif kind is tuple:
+            out[name] = tuple(float(v) for v in text.split(","))
+        else:
+            out[name] = kind(text)
+    return out
+
+
+def texture_path(name: str) -> Path:
+    found = sorted(TEXTURES.glob(f"{name}.*"))
+    if not found:
+        raise SystemExit(f"no texture {name!r} in {TEXTURES}")
+    return found[0]
+
+
+# ---------------------------------------------------------------------------------------------------
+# Renders and their distances
+# ---------------------------------------------------------------------------------------------------
+@torch.no_grad()
+def held_out_renders(scene: GaussianScene, bench: BenchScene) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(RGB uint8 over the scene's background, alpha) of each held-out view."""
+    out = []
+    for cam in bench.held_out:
+        r = render(scene.detach(), [cam], background=bench.background, render_depth=False)
+        rgb = (r.colors[0].clamp(0, 1).cpu().numpy() * 255 + 0.5).astype(np.uint8)
+        out.append((rgb, r.alphas[0].cpu().numpy().reshape(rgb.shape[:2])))
+    return out
+
+
+def score(views: list[tuple[np.ndarray, np.ndarray]], stats: list[measure.TextureStats]) -> dict[str, Any]:
+    """Per measure: each texture's distance, mean over the views."""
+    per_view = [measure.distances(measure.view_stats(rgb, alpha), stats) for rgb, alpha in views]
+    return {m: {t.name: float(np.mean([v[m][t.name] for v in per_view])) for t in stats} for m in MEASURES}
+
+
+def row(scene: str, texture: str, variant: str, dist: dict[str, Any], seconds: float | None = None) -> dict:
+    return {
+        "scene": scene,
+        "texture": texture,
+        "variant": variant,
+        **{f"{m}_rank": measure.rank_of(dist[m], texture) for m in MEASURES},
+        "seconds": seconds,
+        "distances": dist,
+    }
+
+
+# ---------------------------------------------------------------------------------------------------
+# Contact sheet
+# ---------------------------------------------------------------------------------------------------
+def tile(image: np.ndarray, label: str = "") -> np.ndarray:
+    """RGB uint8 image fitted into a TILE square (grey margins), with a label."""
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        image = (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)
+    scale = TILE / max(image.shape[:2])
+    small = cv2.resize(
+        image, (round(image.shape[1] * scale), round(image.shape[0] * scale)), interpolation=cv2.INTER_AREA
+    )
+    out = np.full((TILE, TILE, 3), 96, np.uint8)
+    y, x = (TILE - small.shape[0]) // 2, (TILE - small.shape[1]) // 2
+    out[y : y + small.shape[0], x : x + small.shape[1]] = small
+    if label:
+        cv2.rectangle(out, (0, TILE - 16), (TILE, TILE), (0, 0, 0), -1)
+        cv2.putText(out, label, (3, TILE - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
+    return out
+
+
+def write_sheet(path: Path, sheet: dict[str, list[np.ndarray]]) -> None:
+    width = max(len(r) for r in sheet.values())
+    rows = [np.hstack(r + [np.full((TILE, TILE, 3), 64, np.uint8)] * (width - len(r))) for r in sheet.values()]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cv2.imwrite(str(path), cv2.cvtColor(np.vstack(rows), cv2.COLOR_RGB2BGR))
+
+
+def ranks_label(r: dict, name: str) -> str:
+    return f"{name} G{r['gram_rank']} B{r['gabor_rank']}"
+
+
+# ---------------------------------------------------------------------------------------------------
+# The benchmark
+# ---------------------------------------------------------------------------------------------------
+def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureStats]) -> tuple[list[dict], dict]:
+    base_config = preset(args.presets[0], **args.overrides)
+    bench = load_bench_scene(name, 256)
+    rows: list[dict] = []
+    sheet: dict[str, list[np.ndarray]] = {}
+
+    start = time.perf_counter()
+    original_views = held_out_renders(bench.scene, bench)
+    original = score(original_views, stats)
+    print(f"[{name}] original scored in {time.perf_counter() - start:.1f} s", flush=True)
+    for texture in args.textures:
+        image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
+        sheet[texture] = [tile(image, texture)]
+        r = row(name, texture, "original", original)
+        rows.append(r)
+        for height in args.projected_heights:
+            views = [
+                (
+                    orientation_preview(
+                        bench.scene,
+                        texture_path(texture),
+                        cam,
+                        base_config.angle,
+                        size=max(cam.width, cam.height),
+                        resolution=base_config.resolution,
+                        texture_height=height,
+                        background=bench.background,
+                    ),
+                    alpha,
+                )
+                for cam, (_, alpha) in zip(bench.held_out, original_views, strict=True)
+            ]
+            p = row(name, texture, f"projected-{height}", score(views, stats))
+            rows.append(p)
+            sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
+        sheet[texture].append(tile(original_views[0][0], ranks_label(r, "original")))
+        if args.only_measure:
+            continue
+        for preset_name in args.presets:
+            for seed in args.seeds:
+                overrides = {"weights_path": str(SHARED / "weights"), "background": bench.background, "seed": seed}
+                config = preset(preset_name, **{**overrides, **args.overrides})
+                variant = f"{preset_name}-s{seed}"
+                folder = OUT / args.tag / name
+                saved = folder / f"{texture}-{variant}.ply"
+                settings = json.dumps(config.to_dict(), sort_keys=True, default=str)
+                result_scene = None
+                if args.reuse and saved.is_file() and saved.with_suffix(".json").is_file():
+                    kept = json.loads(saved.with_suffix(".json").read_text())
+                    if kept["config"] == settings:
+                        result_scene, seconds, features = read_scene(saved), kept["seconds"], kept["features"]
+                        print(f"[{name}] {texture} {variant}: reusing {saved}", flush=True)
+                if result_scene is None:
+                    t0 = time.perf_counter()
+                    result = transfer(bench.scene, texture_path(texture), bench.transfer_views, config)
+                    seconds = time.perf_counter() - t0
+                    result_scene, features = result.scene, result.report.get("weights")
+                    folder.mkdir(parents=True, exist_ok=True)
+                    write_ply(saved, result_scene)
+                    saved.with_suffix(".json").write_text(
+                        json.dumps({"config": settings, "seconds": seconds, "features": features}, default=str)
+                    )
+                views = held_out_renders(result_scene, bench)
+                t = row(name, texture, variant, score(views, stats), seconds)
+                t["features"] = features
+                rows.append(t)
+                print(
+                    f"[{name}] {texture} {variant}: {seconds:.0f} s, "
+                    f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}",
+                    flush=True,
+                )
+                for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
+                    sheet[texture].append(tile(rgb, ranks_label(t, f"{variant} v{k}") if k == 0 else f"{variant} v{k}"))
+                for k, (rgb, _) in enumerate(views):
+                    cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    write_sheet(OUT / f"{args.tag}-{name}.png", sheet)
+    return rows, {"held_out": [c.name for c in bench.held_out], "background": bench.background}
+
+
+def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
+    """Per scene and variant: how many textures rank top 1 / top TOP under each measure and both."""
+    out: dict[str, dict[str, dict]] = {}
+    for r in rows:
+        s = out.setdefault(r["scene"], {}).setdefault(
+            r["variant"],
+            {"n": 0, "top1_gram": 0, "top1_gabor": 0, f"top{TOP}_gram": 0, f"top{TOP}_gabor": 0, f"top{TOP}_both": 0},
+        )
+        s["n"] += 1
+        for m in MEASURES:
+            s[f"top1_{m}"] += r[f"{m}_rank"] == 1
+            s[f"top{TOP}_{m}"] += r[f"{m}_rank"] <= TOP
+        s[f"top{TOP}_both"] += all(r[f"{m}_rank"] <= TOP for m in MEASURES)
+    return out
+
+
+def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
+    print(f"\n{'scene':6} {'texture':17} {'variant':14} {'gram':>4} {'gabor':>5} {'seconds':>8}")
+    for r in rows:
+        sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
+        print(f"{r['scene']:6} {r['texture']:17} {r['variant']:14} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8}")
+    print(f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor)")
+    met: dict[str, bool] = {}
+    for scene, variants in summary.items():
+        for variant, s in variants.items():
+            print(
+                f"  {scene:6} {variant:14} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
+                f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})"
+            )
+            if variant != "original" and not variant.startswith("projected"):
+                met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED
+    for key, ok in met.items():
+        print(f"target (top {TOP} under both measures for >= {NEEDED} textures) {key}: {'MET' if ok else 'not met'}")
+    if not met:
+        print("target: no transfer ran (--only-measure)")
+    return met
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", nargs="+", default=["donut", "fern"], choices=["donut", "fern"])
+    parser.add_argument("--textures", nargs="+", default=list(STRUCTURED), metavar="NAME")
+    parser.add_argument("--presets", "--preset", nargs="+", default=["fast"], metavar="PRESET")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="TransferConfig override")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--tag", help="output name (default: the presets, then 'calibration' with --only-measure)")
+    parser.add_argument(
+        "--only-measure", action="store_true", help="calibration only: projected and original, no transfer"
+    )
+    parser.add_argument("--projected-heights", nargs="+", type=int, default=[64, 128], metavar="PX")
+    parser.add_argument(
+        "--reuse", action="store_true", help="measure results saved by an earlier run with the same settings again"
+    )
+    parser.add_argument("--threads", type=int, default=0, help="torch CPU threads for the measure (0: torch's default)")
+    args = parser.parse_args()
+    args.overrides = parse_overrides(args.set)
+    for p in args.presets:
+        preset(p, **args.overrides)  # fail early on an unknown preset or a value out of range
+    args.tag = args.tag or ("calibration" if args.only_measure else "-".join(args.presets))
+    if args.threads:
+        torch.set_num_threads(args.threads)
+
+    start = time.perf_counter()
+    stats = [measure.cached_texture_stats(p) for p in sorted(TEXTURES.iterdir()) if p.is_file()]
+    print(f"texture statistics ({len(stats)} textures) in {time.perf_counter() - start:.1f} s", flush=True)
+    rows, scenes = [], {}
+    for name in args.scenes:
+        scene_rows, scenes[name] = run_scene(name, args, stats)
+        rows += scene_rows
+    summary = summarise(rows)
+    met = print_table(rows, summary)
+    report = {
+        "tag": args.tag,
+        "args": {k: v for k, v in vars(args).items() if k != "overrides"},
+        "overrides": args.overrides,
+        "measure": measure.PARAMS,
+        "scenes": scenes,
+        "rows": rows,
+        "summary": summary,
+        "target": {"top": TOP, "needed": NEEDED, "met": met},
+        "load_average": os.getloadavg(),
+    }
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / f"{args.tag}.json").write_text(json.dumps(report, indent=1, default=str))
+    print(f"wrote {OUT / (args.tag + '.json')} and contact sheets {OUT / args.tag}-<scene>.png")
+
+
+if __name__ == "__main__":
+    main()

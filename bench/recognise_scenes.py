@@ -1,0 +1,85 @@
+"""The two scenes of ``bench/recognise.py``: what the transfer optimises, and the held-out views it never saw.
+
+The donut is the shared PLY: the transfer uses its automatic ring (the preset's ``n_views`` at 20 degrees
+elevation, first view at azimuth 0); the held-out views are a ring at 40 degrees elevation whose azimuths
+fall between the transfer's. The fern is the shared LLFF capture fitted with the project's ``fit`` engine,
+once, cached under ``~/.cache/gt2gs_blender/bench/`` by the fit settings; the transfer uses the LLFF
+training poses and the held-out views are the LLFF test poses (every 8th), which neither the fit nor the
+transfer saw.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from gt2gs_blender.core.api import Camera, GaussianScene, auto_views, load_views, read_scene
+from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
+
+SHARED = ROOT.parent / "shared"
+DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
+FERN = SHARED / "data" / "scenes" / "fern_llff"
+CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gt2gs_blender" / "bench"
+FERN_FIT = {"iterations": 1500, "downscale": 8, "points": DEFAULT_POINTS, "sh_degree": DEFAULT_SH_DEGREE, "seed": 0}
+"""The fern's fit settings (1,500 steps, as bench/ablation.py fits it when missing: ~7 min on 2 cores)."""
+HELD_OUT_ELEVATION = 40.0
+HELD_OUT_RING = 32
+HELD_OUT_DONUT = (1, 9, 17, 25)
+"""Of a 32-view ring at 40 degrees: azimuths 11.25, 101.25, 191.25, 281.25, between the transfer's 16 (22.5 apart)."""
+
+
+@dataclass
+class BenchScene:
+    name: str
+    scene: GaussianScene
+    transfer_views: list[Camera] | None
+    """Cameras the transfer optimises (None = its automatic ring)."""
+    held_out: list[Camera]
+    background: tuple[float, float, float]
+
+
+def fern_fit_dir(settings: dict | None = None) -> Path:
+    """The cached fern fit for ``settings`` (FERN_FIT by default), fitted here first when missing."""
+    settings = {**FERN_FIT, **(settings or {})}
+    key = hashlib.sha1(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:12]
+    folder = CACHE / f"fern-{key}"
+    if not (folder / "point_cloud.ply").is_file():
+        print(f"fitting the fern ({settings}) into {folder} (once)", flush=True)
+        report = fit_llff(
+            FERN,
+            folder,
+            downscale=settings["downscale"],
+            config=FitConfig(iterations=settings["iterations"], seed=settings["seed"]),
+            n_points=settings["points"],
+            sh_degree=settings["sh_degree"],
+        )
+        report.write_json(folder / "fit_report.json")
+        (folder / "fit_settings.json").write_text(json.dumps(settings, indent=1))
+    return folder
+
+
+def load_bench_scene(name: str, resolution: int = 256) -> BenchScene:
+    """``donut`` or ``fern`` with its transfer views and held-out views (longest side ``resolution``)."""
+    if name == "donut":
+        scene = read_scene(DONUT)
+        ring = auto_views(scene, HELD_OUT_RING, width=resolution, height=resolution, elevation_deg=HELD_OUT_ELEVATION)
+        return BenchScene(name, scene, None, [ring[i] for i in HELD_OUT_DONUT], (1.0, 1.0, 1.0))
+    if name == "fern":
+        folder = fern_fit_dir()
+        cameras = load_views(folder / "cameras.json")
+        train = [c for i, c in enumerate(cameras) if i % LLFF_HOLDOUT]
+        test = [c.scaled(resolution / max(c.width, c.height)) for i, c in enumerate(cameras) if not i % LLFF_HOLDOUT]
+        return BenchScene(name, read_scene(folder / "point_cloud.ply"), train, test, (0.0, 0.0, 0.0))
+    raise ValueError(f"unknown scene {name!r}; choose donut or fern")
+
+
+if __name__ == "__main__":
+    print(fern_fit_dir())
