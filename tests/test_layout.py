@@ -227,3 +227,24 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     expected = render(started, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
     preview = layout_preview(scene, texture, [cam], config, size=96)
     assert np.abs(preview.astype(np.float32) - expected).max() <= 1.0
+
+
+def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():
+    """The ideal per-view image of the layout has the bars' period on screen; the layout loss is 0 on
+    it whatever lies off the surface, and grows with a change on the surface."""
+    from gt2gs_blender.core.transfer.layout import layout_images
+    from gt2gs_blender.core.transfer.losses import layout_loss
+
+    scene, cam = wall(n=100), front_camera(96)
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    frame = layout_frame(scene, views, TransferConfig(texture_repeats=2.0))
+    (ideal,) = layout_images(views, stripes(period=32, size=128), frame, 0.0)
+    row = ideal[48, 20:-20].mean(-1).numpy()
+    spectrum = np.abs(np.fft.rfft(row - row.mean()))
+    period_px = len(row) / int(np.argmax(spectrum))
+    expected_px = frame.repeat / 4 * cam.fx / 3.0  # a quarter of the repeat, 3 units away
+    assert period_px == pytest.approx(expected_px, rel=0.15)
+    covered = views.alphas[0] >= 0.9
+    off = torch.where(covered[..., None], ideal, torch.rand_like(ideal))
+    assert float(layout_loss(off, ideal)) == 0.0
+    assert float(layout_loss(ideal + 0.1 * covered[..., None], ideal)) == pytest.approx(0.1, rel=1e-4)

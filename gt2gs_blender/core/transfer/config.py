@@ -120,6 +120,15 @@ class TransferConfig:
         min=0.0,
         max=1.0,
     )
+    lambda_layout: float = setting(
+        1.0,
+        "Layout Strength",
+        "How closely the result keeps the laid-out texture's planks, bricks and cells while the texture "
+        "loss refines its look (with Lay Out Texture on)",
+        "texture",
+        min=0.0,
+        soft_max=10.0,
+    )
     texture_height: int = setting(
         256,
         "Texture Size",

@@ -214,20 +214,53 @@ def layout_colours(
 ) -> torch.Tensor:
     """(N, 3) RGB in [0, 1] per splat: the texture's box projection in ``frame``, rotated by
     ``angle_deg`` counter-clockwise as the first view sees it, prefiltered to each splat's footprint."""
+    footprint = float(scene.scales.detach().max(dim=1).values.median())
+    return project_texture(scene.means.detach(), normals, texture, frame, angle_deg, footprint)
+
+
+@torch.no_grad()
+def layout_images(views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle_deg: float) -> list[torch.Tensor]:
+    """Per view, the laid-out texture as an ideal surface would show it (H, W, 3), sampled per pixel at
+    the surface point the view's depth gives and prefiltered to a pixel's footprint: the structure a
+    render of the laid-out splats only approximates (0 where the view sees no surface)."""
+    images = []
+    for camera, depth, alpha in zip(views.cameras, views.depths, views.alphas):
+        normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
+        z = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA)
+        covered = alpha.cpu() >= SURFACE_ALPHA
+        points = backproject(z, camera)[covered].float()
+        pixel = float(z[covered].median()) / camera.fy if bool(covered.any()) else 0.0
+        colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
+        image = torch.zeros(camera.height, camera.width, 3)
+        image[covered] = colours.float()
+        images.append(image.to(depth.device))
+    return images
+
+
+def project_texture(
+    points: torch.Tensor,
+    normals: torch.Tensor,
+    texture: np.ndarray,
+    frame: LayoutFrame,
+    angle_deg: float,
+    footprint: float,
+) -> torch.Tensor:
+    """(N, 3) RGB of the box projection at world ``points`` with ``normals``; the texture blurred
+    by ``PREFILTER`` x ``footprint`` (a world length) so nothing finer than the footprint aliases."""
     height = texture.shape[0]
     world_per_px = frame.repeat / height
-    axes = torch.from_numpy(frame.axes).to(scene.means)
-    local = scene.means.detach() @ axes.T  # (N, 3): right, up, depth
+    axes = torch.from_numpy(frame.axes).to(points)
+    local = points @ axes.T  # (N, 3): right, up, depth
     facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
     weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
-    blur = PREFILTER * float(scene.scales.detach().max(dim=1).values.median()) / world_per_px
+    blur = PREFILTER * footprint / world_per_px
     image = cv2.GaussianBlur(texture, (0, 0), blur) if blur > 0.5 else texture
     planes = (  # (horizontal, vertical) texture axes of the planes facing right, up and depth
         (local[:, 2], local[:, 1]),
         (local[:, 0], local[:, 2]),
         (local[:, 0], local[:, 1]),
     )
-    colours = torch.zeros(len(scene), 3, dtype=local.dtype, device=local.device)
+    colours = torch.zeros(len(points), 3, dtype=local.dtype, device=local.device)
     for k, (h, v) in enumerate(planes):
         colours += weights[:, k : k + 1] * _sample(image, h / world_per_px, -v / world_per_px, angle_deg)
     return colours.clamp(0.0, 1.0)

@@ -57,6 +57,15 @@ def content_loss(feats: torch.Tensor, content_feats: torch.Tensor) -> torch.Tens
     return F.mse_loss(feats, content_feats)
 
 
+def layout_loss(image: torch.Tensor, layout_image: torch.Tensor) -> torch.Tensor:
+    """Mean absolute difference (H, W, 3) between a render and the laid-out texture, on the pixels the
+    layout covers (it is exactly 0 elsewhere): the texture's structure, pixel for pixel."""
+    covered = layout_image.abs().sum(dim=-1) > 0
+    if not bool(covered.any()):
+        return image.sum() * 0.0
+    return (image - layout_image).abs()[covered].mean()
+
+
 def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:
     """Image total variation: the mean of the squared neighbour differences along height and the
     mean along width, averaged (ARF's squared form). ``image`` is (B,H,W,C) or, with

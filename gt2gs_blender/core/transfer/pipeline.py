@@ -28,7 +28,7 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import lay_out, layout_frame, texture_height_for
+from .layout import lay_out, layout_frame, layout_images, texture_height_for
 from .region import assemble, region_mask, structure_changed, stylise_start
 from .skips import Plateau, redundant_views
 from .stylise import Styliser, StyliseStats, ViewTargets, order_and_link
@@ -195,6 +195,9 @@ def _transfer(
             work, region = lay_out(work, region, content, image, frame, config)
             laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": len(work) - n_work}
     targets = view_targets(used, work, extractor, config, config.backend)
+    if config.layout and config.lambda_layout > 0:
+        ideal = layout_images(used, image, frame, config.angle)
+        targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 
     tracker.begin("bank")

@@ -36,7 +36,7 @@ from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
 from .config import TransferConfig
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
-from .losses import anisotropy, content_loss, cosine_distance, scale_regulariser, tv_loss
+from .losses import anisotropy, content_loss, cosine_distance, layout_loss, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
 
 GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
@@ -63,6 +63,8 @@ class ViewTargets:
     groups: torch.Tensor | None
     frequency: torch.Tensor
     link: PriorLink | None = None
+    layout_image: torch.Tensor | None = None
+    """With the layout on: the laid-out texture as an ideal surface shows it (H, W, 3), 0 off the surface."""
 
 
 @dataclass
@@ -190,6 +192,8 @@ class Styliser:
             + cfg.lambda_content * content_loss(feats, view.content_features)
             + cfg.lambda_tv * tv_loss(image[None])
         )
+        if view.layout_image is not None:
+            loss = loss + cfg.lambda_layout * layout_loss(image, view.layout_image)
         if cfg.stylise_geometry:
             loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
