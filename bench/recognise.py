@@ -1,7 +1,7 @@
 """Issue 19's structure benchmark: would a user recognise the texture on their splat?
 
 ``python bench/recognise.py [--scenes donut fern] [--textures NAME ...] [--presets fast] [--set KEY=VALUE ...]
-[--seeds 0] [--tag TAG] [--only-measure]``
+[--seeds 0] [--tag TAG] [--only-measure] [--reuse [--reuse-older]]``
 
 For each structured texture and scene, a transfer runs (the named preset plus ``--set`` overrides, each seed);
 the result is rendered from held-out views the transfer never optimised (bench/recognise_scenes.py), and all
@@ -11,11 +11,24 @@ pixels, best over texture scales and rotations). Rank 1 = the transferred textur
 
 Calibration, in every run (and alone with ``--only-measure``, seconds per scene): the texture simply projected
 onto the object (``orientation_preview`` at the preset's resolution, texture heights ``--projected-heights``)
-must rank near the top, and the original untransferred scene must not (the null case).
+must rank near the top, and the original untransferred scene must not (the null case). With ``layout`` on,
+a ``layout-start`` row too: the scene with the texture laid out exactly as the run starts from it (before any
+optimisation), rendered from the held-out views (with several presets, ``<preset>-layout-start``).
+
+From the preview: every result's held-out renders are compared image to image with the preview of the same
+views (``recognise_measure.pair_distance``: window by window, both measures, no scale or rotation search),
+``preview_gram`` / ``preview_gabor`` in the rows; ``original_preview_*`` is the same distance for the
+untransferred scene, for scale (a result nearer its preview than the original is keeps what the preview
+promised). The preview is the layout start when ``layout`` is on, else the screen-space orientation preview
+at the run's texture height (a ``projected-<height>`` row); ``preview_reference`` names it.
+
+Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
+settings they ran with; ``--reuse`` measures them again instead of transferring when the settings match (and
+``--reuse-older`` also when the saved settings predate some of today's settings, listed in the row).
 
 Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
-(rows: textures; columns: texture | projected | original | each result's held-out views). The target the
-engine must meet: top 3 under both measures for at least 5 of the 6 textures on each scene.
+(rows: textures; columns: texture | projected | layout start | original | each result's held-out views). The
+target the engine must meet: top 3 under both measures for at least 5 of the 6 textures on each scene.
 """
 
 from __future__ import annotations
@@ -38,7 +51,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
-from recognise_scenes import BenchScene, load_bench_scene
+from recognise_scenes import BenchScene, RunStart, layout_start, load_bench_scene, run_start
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.config import _python_type
@@ -104,10 +117,41 @@ def held_out_renders(scene: GaussianScene, bench: BenchScene) -> list[tuple[np.n
     return out
 
 
-def score(views: list[tuple[np.ndarray, np.ndarray]], stats: list[measure.TextureStats]) -> dict[str, Any]:
+def view_stats(views: list[tuple[np.ndarray, np.ndarray]]) -> list[measure.ViewStats]:
+    return [measure.view_stats(rgb, alpha) for rgb, alpha in views]
+
+
+def score(views: list[measure.ViewStats], stats: list[measure.TextureStats]) -> dict[str, Any]:
     """Per measure: each texture's distance, mean over the views."""
-    per_view = [measure.distances(measure.view_stats(rgb, alpha), stats) for rgb, alpha in views]
+    per_view = [measure.distances(v, stats) for v in views]
     return {m: {t.name: float(np.mean([v[m][t.name] for v in per_view])) for t in stats} for m in MEASURES}
+
+
+def from_preview(views: list[measure.ViewStats], preview: list[measure.ViewStats]) -> dict[str, float]:
+    """Per measure: the image-to-image distance of each held-out view to the preview of that view, mean over
+    the views (views with no window in common left out)."""
+    pairs = [measure.pair_distance(a, b) for a, b in zip(views, preview, strict=True)]
+    out = {}
+    for m in MEASURES:
+        values = [p[m] for p in pairs if p["windows"]]
+        out[m] = float(np.mean(values)) if values else float("nan")
+    return out
+
+
+def run_config(preset_name: str, args: argparse.Namespace, bench: BenchScene, seed: int) -> TransferConfig:
+    overrides = {"weights_path": str(SHARED / "weights"), "background": bench.background, "seed": seed}
+    return preset(preset_name, **{**overrides, **args.overrides})
+
+
+def reusable(saved: dict[str, Any], settings: dict[str, Any], older: bool) -> tuple[bool, list[str]]:
+    """Whether a result saved with ``saved`` settings is the one ``settings`` would make: the same value for
+    every setting both have; settings missing from ``saved`` (added since) only when ``older``. Also returns
+    the names of those missing settings."""
+    differ = sorted(k for k in saved.keys() & settings.keys() if saved[k] != settings[k])
+    missing = sorted(settings.keys() - saved.keys())
+    if differ:
+        print(f"    saved settings differ: {', '.join(f'{k}={saved[k]!r}' for k in differ)}", flush=True)
+    return not differ and (older or not missing), missing
 
 
 def row(scene: str, texture: str, variant: str, dist: dict[str, Any], seconds: float | None = None) -> dict:
@@ -164,14 +208,28 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
 
     start = time.perf_counter()
     original_views = held_out_renders(bench.scene, bench)
-    original = score(original_views, stats)
+    original_stats = view_stats(original_views)
+    original = score(original_stats, stats)
     print(f"[{name}] original scored in {time.perf_counter() - start:.1f} s", flush=True)
+    starts = {p: run_start(bench, run_config(p, args, bench, args.seeds[0])) for p in args.presets}
+    print(f"[{name}] run starts prepared in {time.perf_counter() - start:.1f} s", flush=True)
+    # the preview each preset's results are compared with: its layout start, else the projection at its height
+    references = {
+        p: (f"{p}-layout-start" if len(args.presets) > 1 else "layout-start")
+        if r.config.layout
+        else f"projected-{r.texture_height}"
+        for p, r in starts.items()
+    }
+    heights = list(
+        dict.fromkeys([*args.projected_heights, *(r.texture_height for r in starts.values() if not r.config.layout)])
+    )
+    folder = OUT / args.tag / name
     for texture in args.textures:
         image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
         sheet[texture] = [tile(image, texture)]
+        previews: dict[str, list[measure.ViewStats]] = {}
         r = row(name, texture, "original", original)
-        rows.append(r)
-        for height in args.projected_heights:
+        for height in heights:
             views = [
                 (
                     orientation_preview(
@@ -188,27 +246,50 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 )
                 for cam, (_, alpha) in zip(bench.held_out, original_views, strict=True)
             ]
-            p = row(name, texture, f"projected-{height}", score(views, stats))
+            variant = f"projected-{height}"
+            previews[variant] = view_stats(views)
+            p = row(name, texture, variant, score(previews[variant], stats))
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
+        for preset_name, run in starts.items():
+            if not run.config.layout:
+                continue
+            t0 = time.perf_counter()
+            variant = references[preset_name]
+            views = held_out_renders(layout_start(run, texture_path(texture)), bench)
+            previews[variant] = view_stats(views)
+            p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
+            rows.append(p)
+            sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
+            folder.mkdir(parents=True, exist_ok=True)
+            for k, (rgb, _) in enumerate(views):
+                cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        first = references[args.presets[0]]
+        r.update(preview_fields(from_preview(original_stats, previews[first]), first, starts[args.presets[0]]))
+        rows.append(r)
         sheet[texture].append(tile(original_views[0][0], ranks_label(r, "original")))
         if args.only_measure:
             continue
         for preset_name in args.presets:
+            reference = references[preset_name]
             for seed in args.seeds:
-                overrides = {"weights_path": str(SHARED / "weights"), "background": bench.background, "seed": seed}
-                config = preset(preset_name, **{**overrides, **args.overrides})
+                config = run_config(preset_name, args, bench, seed)
                 variant = f"{preset_name}-s{seed}"
-                folder = OUT / args.tag / name
                 saved = folder / f"{texture}-{variant}.ply"
                 settings = json.dumps(config.to_dict(), sort_keys=True, default=str)
-                result_scene = None
+                result_scene, missing, reused = None, [], False
                 if args.reuse and saved.is_file() and saved.with_suffix(".json").is_file():
                     kept = json.loads(saved.with_suffix(".json").read_text())
-                    if kept["config"] == settings:
+                    ok, missing = reusable(json.loads(kept["config"]), json.loads(settings), args.reuse_older)
+                    if ok:
                         result_scene, seconds, features = read_scene(saved), kept["seconds"], kept["features"]
-                        print(f"[{name}] {texture} {variant}: reusing {saved}", flush=True)
+                        reused = True
+                        note = f" (saved before: {', '.join(missing)})" if missing else ""
+                        print(f"[{name}] {texture} {variant}: reusing {saved}{note}", flush=True)
+                    else:
+                        print(f"[{name}] {texture} {variant}: {saved} has other settings, transferring", flush=True)
                 if result_scene is None:
+                    missing = []
                     t0 = time.perf_counter()
                     result = transfer(bench.scene, texture_path(texture), bench.transfer_views, config)
                     seconds = time.perf_counter() - t0
@@ -219,12 +300,27 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                         json.dumps({"config": settings, "seconds": seconds, "features": features}, default=str)
                     )
                 views = held_out_renders(result_scene, bench)
-                t = row(name, texture, variant, score(views, stats), seconds)
+                result_stats = view_stats(views)
+                t = row(name, texture, variant, score(result_stats, stats), seconds)
                 t["features"] = features
+                t.update(
+                    preview_fields(from_preview(result_stats, previews[reference]), reference, starts[preset_name])
+                )
+                scale = (
+                    {m: r[f"preview_{m}"] for m in MEASURES}
+                    if reference == first
+                    else from_preview(original_stats, previews[reference])
+                )
+                t.update({f"original_preview_{m}": v for m, v in scale.items()})
+                t["reused"] = reused
+                if missing:
+                    t["reused_settings_missing"] = missing
                 rows.append(t)
                 print(
                     f"[{name}] {texture} {variant}: {seconds:.0f} s, "
-                    f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}",
+                    f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}, from {reference}: "
+                    f"gram {t['preview_gram']:.3f} gabor {t['preview_gabor']:.3f} "
+                    f"(original {t['original_preview_gram']:.3f} / {t['original_preview_gabor']:.3f})",
                     flush=True,
                 )
                 for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
@@ -232,7 +328,27 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 for k, (rgb, _) in enumerate(views):
                     cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     write_sheet(OUT / f"{args.tag}-{name}.png", sheet)
-    return rows, {"held_out": [c.name for c in bench.held_out], "background": bench.background}
+    return rows, {
+        "held_out": [c.name for c in bench.held_out],
+        "background": bench.background,
+        "preview": {
+            p: {
+                "reference": references[p],
+                "kind": "layout_start" if r.config.layout else "orientation_preview",
+                "texture_height": r.texture_height,
+            }
+            for p, r in starts.items()
+        },
+    }
+
+
+def preview_fields(distance: dict[str, float], reference: str, run: RunStart) -> dict[str, Any]:
+    return {
+        "preview_gram": distance["gram"],
+        "preview_gabor": distance["gabor"],
+        "preview_reference": reference,
+        "preview_kind": "layout_start" if run.config.layout else "orientation_preview",
+    }
 
 
 def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
@@ -248,23 +364,52 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
             s[f"top1_{m}"] += r[f"{m}_rank"] == 1
             s[f"top{TOP}_{m}"] += r[f"{m}_rank"] <= TOP
         s[f"top{TOP}_both"] += all(r[f"{m}_rank"] <= TOP for m in MEASURES)
+        for key in ("preview_gram", "preview_gabor", "original_preview_gram", "original_preview_gabor"):
+            if key in r:
+                s.setdefault(f"{key}_values", []).append(r[key])
+    for variants in out.values():
+        for s in variants.values():
+            for key in [k for k in s if k.endswith("_values")]:
+                s[f"mean_{key.removesuffix('_values')}"] = float(np.nanmean(s.pop(key)))
     return out
 
 
+def is_transfer(variant: str) -> bool:
+    return variant != "original" and not variant.startswith("projected") and not variant.endswith("layout-start")
+
+
 def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
-    print(f"\n{'scene':6} {'texture':17} {'variant':14} {'gram':>4} {'gabor':>5} {'seconds':>8}")
+    print(
+        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8}   "
+        "from preview gram / gabor (original's)"
+    )
     for r in rows:
         sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
-        print(f"{r['scene']:6} {r['texture']:17} {r['variant']:14} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8}")
+        preview = ""
+        if "preview_gram" in r:
+            preview = f"{r['preview_gram']:.3f} / {r['preview_gabor']:.3f}"
+            if "original_preview_gram" in r:
+                preview += f" ({r['original_preview_gram']:.3f} / {r['original_preview_gabor']:.3f})"
+            preview += f" vs {r['preview_reference']}"
+        print(
+            f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8}   "
+            f"{preview}"
+        )
     print(f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor)")
     met: dict[str, bool] = {}
     for scene, variants in summary.items():
         for variant, s in variants.items():
+            preview = ""
+            if "mean_original_preview_gram" in s:
+                preview = (
+                    f"   from preview {s['mean_preview_gram']:.3f} / {s['mean_preview_gabor']:.3f} "
+                    f"(original {s['mean_original_preview_gram']:.3f} / {s['mean_original_preview_gabor']:.3f})"
+                )
             print(
-                f"  {scene:6} {variant:14} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
-                f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})"
+                f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
+                f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']}){preview}"
             )
-            if variant != "original" and not variant.startswith("projected"):
+            if is_transfer(variant):
                 met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED
     for key, ok in met.items():
         print(f"target (top {TOP} under both measures for >= {NEEDED} textures) {key}: {'MET' if ok else 'not met'}")
@@ -287,6 +432,11 @@ def main() -> None:
     parser.add_argument("--projected-heights", nargs="+", type=int, default=[64, 128], metavar="PX")
     parser.add_argument(
         "--reuse", action="store_true", help="measure results saved by an earlier run with the same settings again"
+    )
+    parser.add_argument(
+        "--reuse-older",
+        action="store_true",
+        help="with --reuse: also results saved before some of today's settings existed (listed in their rows)",
     )
     parser.add_argument("--threads", type=int, default=0, help="torch CPU threads for the measure (0: torch's default)")
     args = parser.parse_args()

@@ -20,6 +20,10 @@ Both measures see grey images only, over the object's pixels only (an eroded alp
    has the Rayleigh value pi/4, edges and cells less); compared by Hellinger distance plus the energy-weighted
    sparsity difference, at the best cyclic shift of the orientation axis (rotation-aware without rotating
    the texture).
+5. Image to image (``pair_distance``): two renders of the same view (a result and the scene it started from),
+   window by window over the windows both lie on the object; the same Gram and Gabor window distances, with
+   no search over scales, rotations or orientation shifts, so a texture turned or rescaled on screen counts.
+   Identical images are 0.
 """
 
 from __future__ import annotations
@@ -322,17 +326,22 @@ def gram_distance(window_grams: list[np.ndarray], texture: TextureStats) -> np.n
     return (total / len(window_grams)).min(axis=1)
 
 
+def _gabor_pair(p: np.ndarray, s: np.ndarray, tp: np.ndarray, ts: np.ndarray) -> np.ndarray:
+    """(B,) Hellinger distance of the energy distributions ``p``/``tp`` plus the energy-weighted mean
+    difference of the sparsities ``s``/``ts`` ((B|1, F, O) each)."""
+    hellinger = np.sqrt(0.5 * ((np.sqrt(p) - np.sqrt(tp)) ** 2).sum((1, 2)))
+    sparsity = (0.5 * (p + tp) * np.abs(s - ts)).sum((1, 2))
+    return hellinger + SPARSITY_WEIGHT * sparsity
+
+
 def gabor_distance(window_desc: np.ndarray, texture: TextureStats) -> np.ndarray:
-    """(B,) per window: min over scales and cyclic orientation shifts of the Hellinger distance of the energy
-    distributions plus the energy-weighted mean difference of the sparsities."""
+    """(B,) per window: min over scales and cyclic orientation shifts of :func:`_gabor_pair`."""
     p, s = window_desc[:, 0], window_desc[:, 1]  # (B, F, O)
     best = np.full(len(p), np.inf)
     for t in texture.gabor:  # (2, F, O)
         for shift in range(N_ORIENT):
             tp, ts = np.roll(t[0], shift, axis=1)[None], np.roll(t[1], shift, axis=1)[None]
-            hellinger = np.sqrt(0.5 * ((np.sqrt(p) - np.sqrt(tp)) ** 2).sum((1, 2)))
-            sparsity = (0.5 * (p + tp) * np.abs(s - ts)).sum((1, 2))
-            best = np.minimum(best, hellinger + SPARSITY_WEIGHT * sparsity)
+            best = np.minimum(best, _gabor_pair(p, s, tp, ts))
     return best
 
 
@@ -341,6 +350,8 @@ class ViewStats:
     grams: list[np.ndarray]
     gabor: np.ndarray
     n_windows: int
+    boxes: list[tuple[int, int]]
+    """(y, x) of each window, in the order of ``grams`` and ``gabor``."""
 
 
 def view_stats(image: np.ndarray, alpha: np.ndarray | None = None) -> ViewStats:
@@ -352,8 +363,29 @@ def view_stats(image: np.ndarray, alpha: np.ndarray | None = None) -> ViewStats:
     p = prepare(image, mask)
     inner = mask.astype(np.uint8)
     return ViewStats(
-        grams(vgg_maps(p), inner, boxes, WINDOW), gabor_descriptors(gabor_energy(p), mask, boxes, WINDOW), len(boxes)
+        grams(vgg_maps(p), inner, boxes, WINDOW),
+        gabor_descriptors(gabor_energy(p), mask, boxes, WINDOW),
+        len(boxes),
+        boxes,
     )
+
+
+def pair_distance(a: ViewStats, b: ViewStats) -> dict[str, float]:
+    """Structure distance between two renders of the same view: {"gram", "gabor"}, the mean over the windows
+    both lie on (the same box in each) of the window distances, no variant search (a turned or rescaled
+    texture counts); {"windows"}: how many (0: none in common, distances NaN). Identical images give 0."""
+    index = {box: k for k, box in enumerate(b.boxes)}
+    pairs = [(k, index[box]) for k, box in enumerate(a.boxes) if box in index]
+    if not pairs:
+        return {"gram": math.nan, "gabor": math.nan, "windows": 0}
+    ia, ib = (np.array(v) for v in zip(*pairs, strict=True))
+    gram = 0.0
+    for ga, gb in zip(a.grams, b.grams, strict=True):
+        x, y = ga[ia].reshape(len(ia), -1), gb[ib].reshape(len(ib), -1)
+        norms = np.linalg.norm(x, axis=1) + np.linalg.norm(y, axis=1)
+        gram = gram + np.linalg.norm(x - y, axis=1) / np.maximum(norms, 1e-12)
+    gabor = _gabor_pair(a.gabor[ia, 0], a.gabor[ia, 1], b.gabor[ib, 0], b.gabor[ib, 1])
+    return {"gram": float(np.mean(gram / len(a.grams))), "gabor": float(gabor.mean()), "windows": len(pairs)}
 
 
 def distances(view: ViewStats, textures: Sequence[TextureStats]) -> dict[str, dict[str, float]]:

@@ -6,6 +6,10 @@ fall between the transfer's. The fern is the shared LLFF capture fitted with the
 once, cached under ``~/.cache/gt2gs_blender/bench/`` by the fit settings; the transfer uses the LLFF
 training poses and the held-out views are the LLFF test poses (every 8th), which neither the fit nor the
 transfer saw.
+
+``run_start``/``layout_start``: what a run on a scene starts from, from the engine's own pieces (the pipeline's
+prepare stage): the layout's frame from the run's views, and the scene with the texture laid out before any
+optimisation step, to render from the held-out views.
 """
 
 from __future__ import annotations
@@ -21,8 +25,16 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from gt2gs_blender.core.api import Camera, GaussianScene, auto_views, load_views, read_scene
+import torch
+
+from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
+from gt2gs_blender.core.scene.gaussians import concat
+from gt2gs_blender.core.transfer.content import content_and_hidden
+from gt2gs_blender.core.transfer.layout import LayoutFrame, lay_out, layout_frame, texture_height_for
+from gt2gs_blender.core.transfer.region import stylise_start
+from gt2gs_blender.core.transfer.texture import load_texture
+from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras
 
 SHARED = ROOT.parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -79,6 +91,47 @@ def load_bench_scene(name: str, resolution: int = 256) -> BenchScene:
         test = [c.scaled(resolution / max(c.width, c.height)) for i, c in enumerate(cameras) if not i % LLFF_HOLDOUT]
         return BenchScene(name, read_scene(folder / "point_cloud.ply"), train, test, (0.0, 0.0, 0.0))
     raise ValueError(f"unknown scene {name!r}; choose donut or fern")
+
+
+@dataclass
+class RunStart:
+    """What every run of one config on one scene starts from, the texture aside (the pipeline's prepare
+    stage, from the engine's own pieces): the views it optimises, its hidden splats, the layout's frame."""
+
+    config: TransferConfig
+    start: GaussianScene
+    """The scene stylisation starts from (SH at the result's degree), hidden splats included."""
+    content: ViewSet | None
+    hidden: torch.Tensor | None
+    frame: LayoutFrame | None
+    texture_height: int
+    """The texture bank's height (``texture_repeats`` > 0 sets it from the frame, as the pipeline does)."""
+
+
+def run_start(bench: BenchScene, config: TransferConfig) -> RunStart:
+    """The prepare stage of a run with ``config`` on ``bench`` (no colour transfer: the layout replaces the
+    colours); the views are rendered only when the layout or ``texture_repeats`` needs them."""
+    original = bench.scene.detach()
+    if not (config.layout or config.texture_repeats > 0):
+        return RunStart(config, original, None, None, None, config.texture_height)
+    cameras = fit_cameras(original, bench.transfer_views, config.resolution, config.n_views)
+    background = torch.tensor(config.background, dtype=original.dtype)
+    content, hidden = content_and_hidden(original, cameras, background, config)
+    frame = layout_frame(original, content, config)
+    height = texture_height_for(frame, content, config.n_scales) if config.texture_repeats > 0 else None
+    start = stylise_start(original, None, config.stylised_sh_degree)
+    return RunStart(config, start, content, hidden, frame, height or config.texture_height)
+
+
+@torch.no_grad()
+def layout_start(run: RunStart, texture: Path) -> GaussianScene:
+    """The scene a run with ``layout`` on starts optimising: the texture laid on the splats the run restyles
+    (hidden ones keep their colours, as the result keeps them), before any step."""
+    assert run.content is not None and run.frame is not None and run.config.layout
+    hidden = run.hidden
+    work = run.start if hidden is None else run.start.subset(~hidden)
+    laid, _ = lay_out(work, None, run.content, load_texture(texture), run.frame, run.config)
+    return laid if hidden is None else concat([run.start.subset(hidden), laid])
 
 
 if __name__ == "__main__":

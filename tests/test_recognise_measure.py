@@ -89,3 +89,20 @@ def test_the_mask_excludes_the_background(stats):
     for m in ("gram", "gabor"):
         assert a[m] == pytest.approx(b[m], rel=1e-5), m
     assert ranks(on_white, stats, "honeycomb", alpha) == {"gram": 1, "gabor": 1}
+
+
+def test_image_to_image_distance_is_zero_for_the_same_image_and_grows_when_the_texture_turns():
+    still = measure.view_stats(picture("brick_wall", 96, 0.0))
+    same = measure.pair_distance(still, measure.view_stats(picture("brick_wall", 96, 0.0)))
+    slightly = measure.pair_distance(still, measure.view_stats(picture("brick_wall", 96, 10.0)))
+    turned = measure.pair_distance(still, measure.view_stats(picture("brick_wall", 96, 60.0)))
+    other = measure.pair_distance(still, measure.view_stats(picture("honeycomb", 96, 0.0)))
+    assert same["windows"] == turned["windows"] == still.n_windows > 0
+    for m in ("gram", "gabor"):
+        assert same[m] == 0.0, m
+        assert 0.0 < slightly[m] < turned[m], m
+        assert turned[m] > 0.5 * other[m], m  # a turned texture is about as far as another texture
+    yy, xx = np.mgrid[:160, :160]
+    disc = ((yy - 80) ** 2 + (xx - 80) ** 2 < 60**2).astype(np.float32)
+    partial = measure.pair_distance(still, measure.view_stats(picture("brick_wall", 96, 0.0), disc))
+    assert 0 < partial["windows"] < still.n_windows  # only the windows both images cover
