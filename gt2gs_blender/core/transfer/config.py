@@ -112,10 +112,10 @@ class TransferConfig:
         soft_max=12.0,
     )
     split_size: float = setting(
-        0.04,
+        0.015,
         "Split Splats Above",
-        "Laying out the texture splits splats larger than this share of one texture repeat, so the "
-        "texture's lines can run between them; 0: never split",
+        "With Lay Out Texture on, splats larger than this share of one texture repeat are split at the "
+        "end (up to 12 times as many splats), so the texture's lines can run between them; 0: never split",
         "texture",
         min=0.0,
         max=1.0,

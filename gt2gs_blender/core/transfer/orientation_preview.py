@@ -23,7 +23,7 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import lay_out, layout_frame
+from .layout import add_detail, lay_out, layout_frame
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
 from .views import render_views
@@ -103,12 +103,15 @@ def layout_preview(
     size: int = 256,
 ) -> np.ndarray:
     """(H, W, 3) uint8: the first of ``cameras`` showing the scene with the texture laid out exactly
-    as a run with ``config`` (``layout`` on) starts from it, before any optimisation."""
+    as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     background = torch.tensor(config.background, dtype=scene.dtype)
     run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
     views = render_views(scene.detach(), run_cameras, background, config.backend)
-    laid, _ = lay_out(scene.detach(), None, views, image, layout_frame(scene, views, config), config)
+    frame = layout_frame(scene, views, config)
+    laid = lay_out(scene.detach(), None, views, image, frame, config)
+    if config.split_size > 0:
+        laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=background, backend=config.backend)
     return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)

@@ -28,10 +28,10 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import lay_out, layout_frame, layout_images, texture_height_for
+from .layout import add_detail, lay_out, layout_frame, layout_images, texture_height_for
 from .region import assemble, region_mask, structure_changed, stylise_start
 from .skips import Plateau, redundant_views
-from .stylise import Styliser, StyliseStats, ViewTargets, order_and_link
+from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture import load_texture
 from .texture_bank import TextureBank, compact_bank
 from .views import ViewSet, fit_cameras, render_views, view_targets
@@ -86,9 +86,9 @@ def stylise(
     config: TransferConfig,
     tracker: Tracker,
     frozen: torch.Tensor | None,
-) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats]:
+) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats, torch.Tensor]:
     """Run the stylise/correct schedule (module ``stylise``), reporting progress and previews; the
-    scene, its frozen rows (after densification) and the counts."""
+    scene, its frozen rows (after densification), the counts and each row's starting colour."""
     order = order_and_link(targets, views.depths, views.alphas)
     styliser = Styliser(scene, targets, order, bank, extractor, config, views.background, frozen)
     phases = styliser.phases()
@@ -112,7 +112,12 @@ def stylise(
                 )
                 step += steps - done - 1
                 break
-    return styliser.scene.detach(), None if frozen is None else styliser.opt.frozen.clone(), styliser.report
+    return (
+        styliser.scene.detach(),
+        None if frozen is None else styliser.opt.frozen.clone(),
+        styliser.report,
+        styliser.opt.attachments[COLOR_ATTACHMENT].detach(),
+    )
 
 
 def transfer(
@@ -192,8 +197,7 @@ def _transfer(
         if config.texture_repeats > 0:
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
-            work, region = lay_out(work, region, content, image, frame, config)
-            laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": len(work) - n_work}
+            work = lay_out(work, region, content, image, frame, config)
     targets = view_targets(used, work, extractor, config, config.backend)
     if config.layout and config.lambda_layout > 0:
         ideal = layout_images(used, image, frame, config.angle)
@@ -212,11 +216,15 @@ def _transfer(
 
     tracker.begin("stylise")
     frozen = None if region is None else ~region
-    work, frozen, stats = stylise(work, used, targets, matching, extractor, config, tracker, frozen)
+    work, frozen, stats, start_colours = stylise(work, used, targets, matching, extractor, config, tracker, frozen)
     tracker.end()
 
     tracker.begin("finish")
     restyled = None if frozen is None else ~frozen
+    if config.layout and config.split_size > 0:
+        n_optimised = len(work)
+        work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config)
+        laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": len(work) - n_optimised}
     if config.color_transfer:
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
