@@ -248,3 +248,32 @@ def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovere
     off = torch.where(covered[..., None], ideal, torch.rand_like(ideal))
     assert float(layout_loss(off, ideal)) == 0.0
     assert float(layout_loss(ideal + 0.1 * covered[..., None], ideal)) == pytest.approx(0.1, rel=1e-4)
+
+
+def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared, tmp_path):
+    """Only the region is laid out and split; the Gaussians outside it come out first, unchanged."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam = wall(n=60), front_camera(96)
+    region = scene.means[:, 0] < 0
+    config = TransferConfig(
+        resolution=96,
+        stylise_steps=4,
+        correct_steps=2,
+        rounds=1,
+        n_scales=1,
+        n_angles=4,
+        layout=True,
+        texture_repeats=2.0,
+        split_size=0.01,
+        evaluate=False,
+        weights_path=str(shared / "weights"),
+        cache_dir=str(tmp_path),
+    )
+    result = transfer(scene, stripes(), [cam], config, region=region)
+    outside = int((~region).sum())
+    for name, value in scene.subset(~region).tensors().items():
+        assert torch.equal(result.scene.tensors()[name][:outside], value), name
+    restyled = result.scene.subset(torch.arange(outside, len(result.scene)))
+    assert len(restyled) > int(region.sum())  # split for detail
+    assert float(restyled.means[:, 0].max()) < 0.05  # and only inside the region
