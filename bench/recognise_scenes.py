@@ -31,7 +31,7 @@ from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_v
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
 from gt2gs_blender.core.scene.gaussians import concat
 from gt2gs_blender.core.transfer.content import content_and_hidden
-from gt2gs_blender.core.transfer.layout import LayoutFrame, lay_out, layout_frame, texture_height_for
+from gt2gs_blender.core.transfer.layout import LayoutFrame, add_detail, lay_out, layout_frame, texture_height_for
 from gt2gs_blender.core.transfer.region import stylise_start
 from gt2gs_blender.core.transfer.texture import load_texture
 from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras
@@ -125,12 +125,15 @@ def run_start(bench: BenchScene, config: TransferConfig) -> RunStart:
 
 @torch.no_grad()
 def layout_start(run: RunStart, texture: Path) -> GaussianScene:
-    """The scene a run with ``layout`` on starts optimising: the texture laid on the splats the run restyles
-    (hidden ones keep their colours, as the result keeps them), before any step."""
+    """The layout a run with ``layout`` on lays, without the optimisation's changes: the texture on the
+    splats the run restyles, split to its detail (hidden ones keep their colours, as the result keeps them)."""
     assert run.content is not None and run.frame is not None and run.config.layout
     hidden = run.hidden
     work = run.start if hidden is None else run.start.subset(~hidden)
-    laid, _ = lay_out(work, None, run.content, load_texture(texture), run.frame, run.config)
+    image = load_texture(texture)
+    laid = lay_out(work, None, run.content, image, run.frame, run.config)
+    if run.config.split_size > 0:
+        laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config)
     return laid if hidden is None else concat([run.start.subset(hidden), laid])
 
 
