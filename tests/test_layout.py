@@ -277,3 +277,17 @@ def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared,
     restyled = result.scene.subset(torch.arange(outside, len(result.scene)))
     assert len(restyled) > int(region.sum())  # split for detail
     assert float(restyled.means[:, 0].max()) < 0.05  # and only inside the region
+
+
+def test_each_point_reads_the_texture_blurred_to_its_own_footprint():
+    """A point with a footprint far above the bars' period reads their mean; a tiny one reads a bar."""
+    from gt2gs_blender.core.transfer.layout import LayoutFrame, project_texture
+
+    frame = LayoutFrame(axes=np.eye(3), repeat=1.0)  # one texture height per world unit
+    texture = stripes(period=16, size=128)  # bars 8 texture px = 1/16 unit wide
+    x = torch.full((2,), 0.25 / 8 + 0.001)  # the middle of the first white bar
+    points = torch.stack([x, torch.zeros(2), torch.zeros(2)], -1)
+    normals = torch.tensor([[0.0, 0.0, 1.0]]).expand(2, 3)
+    fine, coarse = project_texture(points, normals, texture, frame, 0.0, torch.tensor([1e-4, 0.5])).mean(-1)
+    assert float(fine) > 0.95 or float(fine) < 0.05
+    assert abs(float(coarse) - 0.5) < 0.05

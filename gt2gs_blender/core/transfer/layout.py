@@ -57,7 +57,9 @@ SPLIT_SHRINK = 0.6
 SPLIT_PASSES = 3
 """At most three 2 x 2 splits (64 children) per splat."""
 PREFILTER = 0.5
-"""A splat samples the texture blurred by half its largest sigma (in texture pixels)."""
+"""A splat samples the texture blurred by half its largest sigma (in texture pixels) ..."""
+PYRAMID_LEVELS = 8
+"""... from the nearest of blurs 0, 1, 2, 4, ... 64 texture pixels."""
 MIN_TEXTURE_HEIGHT = 8
 """The smallest texture height the bank is built at (the config's own minimum)."""
 EXTENT_QUANTILE = 0.02
@@ -215,7 +217,7 @@ def layout_colours(
 ) -> torch.Tensor:
     """(N, 3) RGB in [0, 1] per splat: the texture's box projection in ``frame``, rotated by
     ``angle_deg`` counter-clockwise as the first view sees it, prefiltered to each splat's footprint."""
-    footprint = float(scene.scales.detach().max(dim=1).values.median())
+    footprint = scene.scales.detach().max(dim=1).values
     return project_texture(scene.means.detach(), normals, texture, frame, angle_deg, footprint)
 
 
@@ -244,26 +246,31 @@ def project_texture(
     texture: np.ndarray,
     frame: LayoutFrame,
     angle_deg: float,
-    footprint: float,
+    footprint: torch.Tensor | float,
 ) -> torch.Tensor:
-    """(N, 3) RGB of the box projection at world ``points`` with ``normals``; the texture blurred
-    by ``PREFILTER`` x ``footprint`` (a world length) so nothing finer than the footprint aliases."""
+    """(N, 3) RGB of the box projection at world ``points`` with ``normals``; each point reads the
+    texture blurred by ``PREFILTER`` x its ``footprint`` (a world length, per point or one for all),
+    the nearest of a pyramid of blurs, so nothing finer than a splat aliases and nothing coarser is lost."""
     height = texture.shape[0]
     world_per_px = frame.repeat / height
     axes = torch.from_numpy(frame.axes).to(points)
     local = points @ axes.T  # (N, 3): right, up, depth
     facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
     weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
-    blur = PREFILTER * footprint / world_per_px
-    image = cv2.GaussianBlur(texture, (0, 0), blur) if blur > 0.5 else texture
+    blur = PREFILTER * torch.as_tensor(footprint, dtype=local.dtype, device=local.device) / world_per_px
+    level = torch.log2(blur.clamp_min(0.5) / 0.5).round().clamp(0, PYRAMID_LEVELS - 1).long().expand(len(points))
     planes = (  # (horizontal, vertical) texture axes of the planes facing right, up and depth
         (local[:, 2], local[:, 1]),
         (local[:, 0], local[:, 2]),
         (local[:, 0], local[:, 1]),
     )
     colours = torch.zeros(len(points), 3, dtype=local.dtype, device=local.device)
-    for k, (h, v) in enumerate(planes):
-        colours += weights[:, k : k + 1] * _sample(image, h / world_per_px, -v / world_per_px, angle_deg)
+    for k in level.unique().tolist():
+        rows = (level == k).nonzero().squeeze(1)
+        image = cv2.GaussianBlur(texture, (0, 0), 0.5 * 2.0**k) if k > 0 else texture
+        for p, (h, v) in enumerate(planes):
+            sampled = _sample(image, h[rows] / world_per_px, -v[rows] / world_per_px, angle_deg)
+            colours[rows] += weights[rows, p : p + 1] * sampled
     return colours.clamp(0.0, 1.0)
 
 
