@@ -30,8 +30,12 @@ def _is_splat(self, obj) -> bool:
     return splats.is_splat_object(obj)
 
 
+PREVIEWED = ("angle", "texture_height", "layout", "texture_repeats", "split_size")
+"""Settings the orientation preview shows: changing one re-renders it when the user asked for that."""
+
+
 def _layout_changed(self, context) -> None:
-    """Re-render the orientation preview when the texture's angle or size changes, if the user asked for it."""
+    """Re-render the orientation preview when what it shows changes (PREVIEWED), if the user asked for it."""
     if self.auto_preview and not _applying_preset and bpy.ops.gt2gs.preview_orientation.poll():
         bpy.ops.gt2gs.preview_orientation("INVOKE_DEFAULT")
 
@@ -113,7 +117,7 @@ GT2GS_PG_settings = type(
         "__doc__": "The scene's texture-transfer settings",
         "__annotations__": {
             **FRONT_END,
-            **properties.annotations(IN_SCENE, {"angle": _layout_changed, "texture_height": _layout_changed}),
+            **properties.annotations(IN_SCENE, dict.fromkeys(PREVIEWED, _layout_changed)),
         },
     },
 )
