@@ -126,7 +126,7 @@ def test_layout_lays_the_texture_at_its_repeat_and_angle(angle):
     views = render_views(scene, [cam], torch.ones(3), "auto")
     config = TransferConfig(texture_repeats=2.0, angle=angle)
     frame = layout_frame(scene, views, config)
-    assert frame.repeat == pytest.approx(2.0 * 0.96 / 2.0, rel=0.02)  # 2-98 % of a 2-unit wall, twice
+    assert frame.repeat == pytest.approx(2.0 / 2.0, rel=0.05)  # a 2-unit wall seen whole, twice across
     normals = surface_normals(scene, [cam], views.depths, views.alphas)
     texture = stripes(period=32, size=128)  # 4 bar pairs per texture height
     colours = layout_colours(scene, normals, texture, frame, angle).mean(1).reshape(120, 120).numpy()

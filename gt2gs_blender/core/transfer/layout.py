@@ -8,7 +8,7 @@ every view agrees on.
   ``right`` the first view's right made orthogonal to it; ``depth`` completes the frame. A surface
   facing ``depth`` shows the texture as the first view shows it, rotated by the start angle.
 - Size: the texture's height spans ``object size / repeats`` in the world, the object's size being
-  its visible centres' extent along ``right`` and ``up`` (2nd to 98th percentile).
+  what the first view sees of it (its covered pixels' box at their median depth).
 - Normals come from the views' rendered depth (blurred, so sprinkles and specks do not flip the
   plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
   sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
@@ -37,6 +37,7 @@ from ..cameras.camera import Camera
 from ..cameras.warp import backproject, expected_depth, reproject
 from ..errors import GT2GSError
 from ..features.specs import RENDER_SCALE
+from ..render import render
 from ..scene.gaussians import GaussianScene, concat, quats_to_rotmats
 from ..scene.inria import SH_C0
 from .config import TransferConfig
@@ -63,7 +64,7 @@ PYRAMID_LEVELS = 8
 MIN_TEXTURE_HEIGHT = 8
 """The smallest texture height the bank is built at (the config's own minimum)."""
 EXTENT_QUANTILE = 0.02
-"""The object's size ignores the 2 % outermost centres on each side (strays, floaters)."""
+"""The object's size ignores the 2 % outermost covered pixels on each side (strays, floaters)."""
 
 
 @dataclass(frozen=True)
@@ -94,11 +95,25 @@ def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -
     if config.texture_repeats <= 0:
         repeat = config.texture_height / RENDER_SCALE * _nearest_depth(views, config.n_scales) / cameras[0].fy
         return LayoutFrame(axes=axes, repeat=repeat)
-    coords = scene.means.detach().double().cpu() @ torch.from_numpy(axes[:2]).T
+    return LayoutFrame(axes=axes, repeat=_seen_size(scene, cameras[0], config.backend) / config.texture_repeats)
+
+
+@torch.no_grad()
+def _seen_size(scene: GaussianScene, camera: Camera, backend: str) -> float:
+    """The size of ``scene`` as ``camera`` sees it: the larger side of the box around its covered
+    pixels (2nd to 98th percentile) at the covered pixels' median depth, in world units. A whole
+    captured scene (LLFF) measures the frame at the foreground, not its far background's extent."""
+    out = render(scene.detach(), [camera], backend=backend)
+    alpha, depth = out.alphas[0].cpu(), out.depths[0].cpu()
+    covered = alpha >= SURFACE_ALPHA
+    if not bool(covered.any()):
+        raise GT2GSError("the first view does not see the object: nothing to lay the texture on")
+    rows, cols = covered.nonzero(as_tuple=True)
     q = torch.tensor([EXTENT_QUANTILE, 1.0 - EXTENT_QUANTILE], dtype=torch.float64)
-    lohi = torch.quantile(coords, q, dim=0)
-    size = float((lohi[1] - lohi[0]).max())
-    return LayoutFrame(axes=axes, repeat=max(size, 1e-12) / config.texture_repeats)
+    height = float(torch.quantile(rows.double(), q).diff())
+    width = float(torch.quantile(cols.double(), q).diff())
+    surface = float(expected_depth(depth, alpha, SURFACE_ALPHA)[covered].median())
+    return max(width / camera.fx, height / camera.fy, 1e-12) * surface
 
 
 def texture_height_for(frame: LayoutFrame, views: ViewSet, n_scales: int) -> int:
