@@ -111,6 +111,23 @@ def test_split_stops_at_the_size_and_the_count():
     assert float(fine.scales.max(dim=1).values.max()) <= largest * 0.5 + 1e-6
 
 
+def wall_config(shared, tmp_path, **overrides) -> TransferConfig:
+    """A short laid-out run over the wall at 96 px (one depth group, no densification, no metrics)."""
+    base = dict(
+        resolution=96,
+        rounds=1,
+        n_scales=1,
+        n_angles=8,
+        layout=True,
+        texture_repeats=2.0,
+        densify=False,
+        evaluate=False,
+        weights_path=str(shared / "weights"),
+        cache_dir=str(tmp_path),
+    )
+    return TransferConfig(**{**base, **overrides})
+
+
 def stripes(period: int = 32, size: int = 128) -> np.ndarray:
     """Vertical black and white bars, ``period`` px per pair."""
     x = np.arange(size)
@@ -177,22 +194,7 @@ def test_a_transfer_with_the_layout_keeps_the_stripes_period_and_angle(shared, t
 
     scene, cam = wall(n=100), front_camera(96)
     texture = stripes(period=32, size=128)
-    config = TransferConfig(
-        resolution=96,
-        stylise_steps=20,
-        correct_steps=10,
-        rounds=1,
-        n_scales=1,
-        n_angles=8,
-        layout=True,
-        texture_repeats=2.0,
-        angle=angle,
-        densify=False,
-        evaluate=False,
-        color_transfer=False,
-        weights_path=str(shared / "weights"),
-        cache_dir=str(tmp_path),
-    )
+    config = wall_config(shared, tmp_path, stylise_steps=20, correct_steps=10, angle=angle, color_transfer=False)
     result = transfer(scene, texture, [cam], config)
     assert result.report["skips"]["layout"]["split"] >= 0
     grey = render(result.scene, [cam], background=torch.ones(3)).colors[0].mean(-1).numpy()[20:-20, 20:-20]
@@ -211,17 +213,8 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
 
     scene, cam = wall(n=80, tilt_deg=20.0), front_camera(96)
     texture = stripes(period=32, size=128)
-    config = TransferConfig(
-        resolution=96,
-        stylise_steps=0,
-        correct_steps=0,
-        layout=True,
-        texture_repeats=3.0,
-        angle=30.0,
-        color_transfer=False,
-        evaluate=False,
-        weights_path=str(shared / "weights"),
-        cache_dir=str(tmp_path),
+    config = wall_config(
+        shared, tmp_path, stylise_steps=0, correct_steps=0, texture_repeats=3.0, angle=30.0, color_transfer=False
     )
     started = transfer(scene, texture, [cam], config).scene
     expected = render(started, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
@@ -256,20 +249,7 @@ def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared,
 
     scene, cam = wall(n=60), front_camera(96)
     region = scene.means[:, 0] < 0
-    config = TransferConfig(
-        resolution=96,
-        stylise_steps=4,
-        correct_steps=2,
-        rounds=1,
-        n_scales=1,
-        n_angles=4,
-        layout=True,
-        texture_repeats=2.0,
-        split_size=0.01,
-        evaluate=False,
-        weights_path=str(shared / "weights"),
-        cache_dir=str(tmp_path),
-    )
+    config = wall_config(shared, tmp_path, stylise_steps=4, correct_steps=2, n_angles=4, split_size=0.01)
     result = transfer(scene, stripes(), [cam], config, region=region)
     outside = int((~region).sum())
     for name, value in scene.subset(~region).tensors().items():
