@@ -527,6 +527,8 @@ def test_cli_transfer_leaves_its_inputs_unchanged_and_writes_only_its_output(inp
             "torch",
             "--device",
             "cpu",
+            "--split-size",
+            "0",
         ]
     )
     assert code == 0, capsys.readouterr().err

@@ -286,8 +286,8 @@ def test_transfer_command_writes_scene_report_and_strip(capsys, small_ply, tmp_p
         str(tmp_path / "s.png"),
     )
     assert code == 0, err
-    assert len(read_ply(out)) == 1200
     report = json.loads((tmp_path / "r.json").read_text())
+    assert len(read_ply(out)) == report["n_gaussians"] >= 1200  # the layout's detail split adds splats
     assert report["weights"]["fallback"] is False  # the shared VGG-19 weights were found
     assert read_png(tmp_path / "s.png").shape == (512, 1280, 3)
 

@@ -86,4 +86,6 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     given = {name: str(v) if isinstance(v, Path) else v for name, v in given.items()}
     if given.get("background") is not None:
         given["background"] = tuple(given["background"])
+    if given.get("texture_height") is not None and given.get("texture_repeats") is None:
+        given["texture_repeats"] = 0.0  # a size in pixels asked for is the size used
     return preset(args.preset, **given, **extra)
