@@ -83,9 +83,25 @@ def effective_text(name: str, value: Any, info: dict[str, Any] | None = None) ->
     return f"At 0: {found.group(1).strip()}" if found else None
 
 
+USED_WHEN: dict[str, Callable[[Any], bool]] = {
+    "texture_height": lambda s: s.texture_repeats == 0,
+    "split_size": lambda s: s.layout,
+    "lambda_layout": lambda s: s.layout,
+}
+"""Settings a run uses only when another one allows it: greyed out otherwise, as Blender does."""
+
+
+def setting_used(owner: Any, name: str) -> bool:
+    """Whether a run with ``owner``'s settings uses setting ``name``."""
+    return name not in USED_WHEN or bool(USED_WHEN[name](owner))
+
+
 def draw_setting(layout, owner, name: str, info: dict[str, Any] | None) -> None:
-    """A setting's property, with the value a run will use under it when it is automatic."""
-    layout.prop(owner, name)
+    """A setting's property (greyed out when the run ignores it), with the value a run will use under it
+    when it is automatic."""
+    row = layout.row()
+    row.active = setting_used(owner, name)
+    row.prop(owner, name)
     text = effective_text(name, getattr(owner, name), info)
     if text:
         split = layout.split(factor=0.4)

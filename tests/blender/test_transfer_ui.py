@@ -506,6 +506,19 @@ def test_automatic_settings_show_the_value_a_run_uses():
     assert effective_text("gpb", False) is None and effective_text("seed", 0) is None  # 0 is a value there
 
 
+def test_settings_a_run_ignores_are_greyed_out(fresh):
+    """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on."""
+    from gt2gs_blender.panels.sections import USED_WHEN, setting_used
+
+    settings = fresh.context.scene.gt2gs
+    assert set(USED_WHEN) <= set(type(settings).__annotations__)
+    settings.texture_repeats, settings.layout = 1.5, True
+    assert not setting_used(settings, "texture_height") and setting_used(settings, "split_size")
+    settings.texture_repeats, settings.layout = 0.0, False
+    assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
+    assert setting_used(settings, "angle")
+
+
 def test_texture_thumbnail_leaves_no_image_datablock(blob, inputs):
     from gt2gs_blender.blender import textures
 
