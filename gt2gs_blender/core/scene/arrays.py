@@ -10,6 +10,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+PARAMETERS = ("means", "quats", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
+"""The per-Gaussian parameters of a scene, in order: the numpy arrays here, the tensors of GaussianScene."""
+
 
 @dataclass
 class SplatArrays:
@@ -29,11 +32,4 @@ class SplatArrays:
 
     def tensors(self) -> dict[str, np.ndarray]:
         """The parameter arrays by name (the keys of ``GaussianScene.tensors()``)."""
-        return {
-            "means": self.means,
-            "quats": self.quats,
-            "log_scales": self.log_scales,
-            "opacity_logits": self.opacity_logits,
-            "sh_dc": self.sh_dc,
-            "sh_rest": self.sh_rest,
-        }
+        return {name: getattr(self, name) for name in PARAMETERS}

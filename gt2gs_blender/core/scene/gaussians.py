@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from .arrays import PARAMETERS
 from .inria import SH_C0, sh_coeff_count, sh_degree_from_rest
 
 if TYPE_CHECKING:
@@ -152,14 +153,7 @@ class GaussianScene:
     # -- structure ----------------------------------------------------------------------------------
     def tensors(self) -> dict[str, torch.Tensor]:
         """The trainable parameter tensors by name."""
-        return {
-            "means": self.means,
-            "quats": self.quats,
-            "log_scales": self.log_scales,
-            "opacity_logits": self.opacity_logits,
-            "sh_dc": self.sh_dc,
-            "sh_rest": self.sh_rest,
-        }
+        return {name: getattr(self, name) for name in PARAMETERS}
 
     def map_tensors(self, fn) -> GaussianScene:
         """A new scene with ``fn`` applied to every parameter tensor (extras untouched)."""
