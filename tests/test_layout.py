@@ -232,15 +232,20 @@ def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovere
     views = render_views(scene, [cam], torch.ones(3), "auto")
     frame = layout_frame(scene, views, TransferConfig(texture_repeats=2.0))
     (ideal,) = layout_images(views, stripes(period=32, size=128), frame, 0.0)
-    row = ideal[48, 20:-20].mean(-1).numpy()
+    assert ideal.shape == (96, 96, 4)
+    row = ideal[48, 20:-20, :3].mean(-1).numpy()
     spectrum = np.abs(np.fft.rfft(row - row.mean()))
     period_px = len(row) / int(np.argmax(spectrum))
     expected_px = frame.repeat / 4 * cam.fx / 3.0  # a quarter of the repeat, 3 units away
     assert period_px == pytest.approx(expected_px, rel=0.15)
     covered = views.alphas[0] >= 0.9
-    off = torch.where(covered[..., None], ideal, torch.rand_like(ideal))
+    assert torch.equal(ideal[..., 3] > 0, covered)
+    off = torch.where(covered[..., None], ideal[..., :3], torch.rand(96, 96, 3))
     assert float(layout_loss(off, ideal)) == 0.0
-    assert float(layout_loss(ideal + 0.1 * covered[..., None], ideal)) == pytest.approx(0.1, rel=1e-4)
+    assert float(layout_loss(ideal[..., :3] + 0.1, ideal)) == pytest.approx(0.1, rel=1e-4)
+    black = ideal.clone()
+    black[..., :3] = 0.0  # a black texture still counts on the surface
+    assert float(layout_loss(torch.full((96, 96, 3), 0.5), black)) == pytest.approx(0.5, rel=1e-6)
 
 
 def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared, tmp_path):

@@ -241,9 +241,9 @@ def layout_colours(
 
 @torch.no_grad()
 def layout_images(views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle_deg: float) -> list[torch.Tensor]:
-    """Per view, the laid-out texture as an ideal surface would show it (H, W, 3), sampled per pixel at
-    the surface point the view's depth gives and prefiltered to a pixel's footprint: the structure a
-    render of the laid-out splats only approximates (0 where the view sees no surface)."""
+    """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
+    sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
+    the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface)."""
     images = []
     for camera, depth, alpha in zip(views.cameras, views.depths, views.alphas):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -252,8 +252,8 @@ def layout_images(views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle
         points = backproject(z, camera)[covered].float()
         pixel = float(z[covered].median()) / camera.fy if bool(covered.any()) else 0.0
         colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
-        image = torch.zeros(camera.height, camera.width, 3)
-        image[covered] = colours.float()
+        image = torch.zeros(camera.height, camera.width, 4)
+        image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))
     return images
 

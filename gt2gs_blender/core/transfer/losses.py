@@ -57,13 +57,14 @@ def content_loss(feats: torch.Tensor, content_feats: torch.Tensor) -> torch.Tens
     return F.mse_loss(feats, content_feats)
 
 
-def layout_loss(image: torch.Tensor, layout_image: torch.Tensor) -> torch.Tensor:
-    """Mean absolute difference (H, W, 3) between a render and the laid-out texture, on the pixels the
-    layout covers (it is exactly 0 elsewhere): the texture's structure, pixel for pixel."""
-    covered = layout_image.abs().sum(dim=-1) > 0
+def layout_loss(image: torch.Tensor, layout: torch.Tensor) -> torch.Tensor:
+    """Mean absolute difference between a render (H, W, 3) and the laid-out texture (H, W, 4: colour and
+    coverage), on the pixels the layout covers: the texture's structure, pixel for pixel (a black texel
+    counts as much as any other)."""
+    covered = layout[..., 3] > 0
     if not bool(covered.any()):
         return image.sum() * 0.0
-    return (image - layout_image).abs()[covered].mean()
+    return (image - layout[..., :3]).abs()[covered].mean()
 
 
 def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:

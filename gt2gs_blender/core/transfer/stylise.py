@@ -64,7 +64,7 @@ class ViewTargets:
     frequency: torch.Tensor
     link: PriorLink | None = None
     layout_image: torch.Tensor | None = None
-    """With the layout on: the laid-out texture as an ideal surface shows it (H, W, 3), 0 off the surface."""
+    """With the layout on: the laid-out texture as an ideal surface shows it (H, W, 4: colour, coverage)."""
 
 
 @dataclass
