@@ -198,6 +198,7 @@ def _transfer(
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
             work = lay_out(work, region, content, image, frame, config)
+            laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
     if config.layout and config.lambda_layout > 0:
         ideal = layout_images(used, image, frame, config.angle)
@@ -224,7 +225,7 @@ def _transfer(
     if config.layout and config.split_size > 0:
         n_optimised = len(work)
         work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config)
-        laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": len(work) - n_optimised}
+        laid_out.update(splats=len(work), split=len(work) - n_optimised)
     if config.color_transfer:
         stylised_views = render_views(work, cameras, background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
