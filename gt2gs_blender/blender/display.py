@@ -6,9 +6,10 @@ the rasterizer's depth order (centre by centre); the material evaluates the Gaus
 pixel's ray: with the point P and view vector V in the Gaussian's whitened frame, d² = P·P − (P·V̂)²
 and alpha = min(0.99, opacity · exp(−d²/2)) over an Emission of the DC colour. Each σ² is widened by
 0.3 · (depth / focal_px)², the rasterizer's 0.3 px² screen-space dilation carried into 3D for the
-camera. Geometry nodes cannot read the render size, so it is a modifier input (``apply_display`` fills
-it in). Everything the display adds lives on the evaluated mesh; the point cloud, and so every export,
-keeps only its PLY attributes.
+camera. In Cycles a ray that has crossed ``OPAQUE_AFTER`` splat layers takes the next splat it meets as
+opaque, so it stops where the rasterizer's transmittance has long run out. Geometry nodes cannot read the
+render size, so it is a modifier input (``apply_display`` fills it in). Everything the display adds
+lives on the evaluated mesh; the point cloud, and so every export, keeps only its PLY attributes.
 
 Colour: the rasterizer composites display values (0.5 + SH_C0 · f_dc) as they are; Blender composites
 scene-linear light and encodes it for display, so the emission is the sRGB-decoded colour and, under the
@@ -23,19 +24,25 @@ import bpy
 from ..core.scene.inria import SH_C0
 from . import views
 
-GROUP_NAME = "GT2GS Splats v1"
-MATERIAL_NAME = "GT2GS Splat Display v1"
+GROUP_NAME = "GT2GS Splats v2"
+MATERIAL_NAME = "GT2GS Splat Display v2"
 MODIFIER_NAME = "GT2GS Splats"
 TAG = "gt2gs_display"
-VERSION = 1
+VERSION = 2
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
 EPS2D = 0.3
 """Screen-space dilation (px²) of the rasterizer (core.render.projection.EPS2D), restated: blender/ may not
 import the torch side of core."""
+OPAQUE_AFTER = 128
+"""Splat layers a Cycles ray crosses before the next splat it meets is drawn opaque (the Light Path node's
+transparent depth; EEVEE reports 0 and is unaffected). A ray behind the donut's front surface still crosses
+hundreds of quads whose light no longer reaches the camera (the rasterizer stops at transmittance 1e-4); Cycles
+cannot see the transmittance, so it pays for them all. Donut, 256 px, 32 samples, view 0, 2 cores: 64 layers
+36 s / object SSIM 0.921, 128: 70 s / 0.961, 256: 139 s / 0.971; no cut (1024 bounces) 340 s / 0.972."""
 TRANSPARENT_BOUNCES = 1024
-"""Cycles transparent bounces (max = min): grazing rays at the silhouette cross hundreds of faint splats; on the
-donut (256 px, view 0) object SSIM is 0.883 with 128, 0.939 with 256, 0.972 with 1024."""
+"""Cycles transparent bounces (max = min, no Russian roulette, whose rare survivors speckle): only rays that keep
+passing through quad corners (alpha 0) after ``OPAQUE_AFTER`` layers get this far; the limit ends them (black)."""
 PREFIX = "gt2gs_"
 INPUTS = ("Density", "Points in Viewport", "Render Size", "Camera")
 
@@ -259,10 +266,18 @@ def _build_material(material: bpy.types.Material) -> None:
     falloff = n.math("EXPONENT", n.math("MULTIPLY", d2, -0.5))
     alpha = n.math("MINIMUM", n.math("MULTIPLY", attr("opacity")["Fac"], falloff), ALPHA_MAX)
     alpha = n.math("MULTIPLY", alpha, n.math("GREATER_THAN", alpha, ALPHA_MIN))
+    alpha = n.math("MAXIMUM", alpha, _opaque_after(n, alpha))
     emission = n.add("ShaderNodeEmission", {"Color": attr("color")["Color"], "Strength": 1.0})
     transparent = n.add("ShaderNodeBsdfTransparent")
     mix = n.add("ShaderNodeMixShader", {0: alpha, 1: transparent.outputs[0], 2: emission.outputs[0]})
     n.feed(n.add("ShaderNodeOutputMaterial").inputs["Surface"], mix.outputs[0])
+
+
+def _opaque_after(n: _Nodes, alpha: Socket) -> Socket:
+    """1 where the ray has crossed ``OPAQUE_AFTER`` splat layers and meets a visible splat, else 0."""
+    layers = n.add("ShaderNodeLightPath").outputs["Transparent Depth"]
+    deep = n.math("GREATER_THAN", layers, OPAQUE_AFTER - 0.5)
+    return n.math("MULTIPLY", deep, n.math("GREATER_THAN", alpha, 0.0))
 
 
 def remove_unused() -> None:

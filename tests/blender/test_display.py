@@ -45,7 +45,7 @@ def evaluated_quads(obj) -> tuple[int, set[str]]:
 def test_import_adds_display_shared_and_versioned(fresh, donut):
     first, second = import_file(donut), import_file(donut)
     groups = [g for g in bpy.data.node_groups if g.get(display.TAG)]
-    assert [g.name for g in groups] == [display.GROUP_NAME] and "v1" in display.GROUP_NAME
+    assert [g.name for g in groups] == [display.GROUP_NAME] and f"v{display.VERSION}" in display.GROUP_NAME
     assert groups[0].get(display.TAG) == display.VERSION
     for obj in (first, second):
         modifier = display.display_modifier(obj)
@@ -197,7 +197,7 @@ def _render_views(engine, views, folder, filter_px):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("engine", ["BLENDER_EEVEE"])
+@pytest.mark.parametrize("engine", ["BLENDER_EEVEE", "CYCLES"])
 def test_renders_match_the_rasterizer(fresh, donut, tmp_path, engine):
     views, reference, alpha = _reference(donut)
     for i, ref in enumerate(reference):  # the oracle beside the renders, for a look
