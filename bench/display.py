@@ -3,7 +3,7 @@
     .venv/bin/python bench/display.py [--skip-cycles]
 
 Prints a table and writes bench/out/display.json. Renders are the shared donut at 256 px, 32 samples, from
-a generated view, after gt2gs.setup_scene (EEVEE's first render includes its shader compilation).
+its first generated view, after gt2gs.setup_scene (EEVEE's first render includes its shader compilation).
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ if str(ROOT) not in sys.path:
 import bpy
 
 import gt2gs_blender
-from gt2gs_blender.blender import display, splats
+from gt2gs_blender.blender import display, splats, views
 from gt2gs_blender.core.scene.arrays import SplatArrays
 
 DONUT = ROOT.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -65,18 +65,19 @@ def setup_times(n: int) -> dict:
 
 
 def render_times(engines: list[str]) -> dict:
-    """Seconds per 256 px render of the donut, per engine (two renders: the first, then a warm one)."""
-    import mathutils
+    """Seconds per 256 px render of the donut from its first generated view (the display test's view 0), per
+    engine (two renders: the first, then a warm one)."""
+    from gt2gs_blender.core.cameras.generate import auto_views
+    from gt2gs_blender.core.scene.files import read_scene
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
     assert bpy.ops.gt2gs.import_ply(filepath=str(DONUT), setup_scene=True) == {"FINISHED"}
     scene = bpy.context.scene
     scene.render.resolution_x = scene.render.resolution_y = 256
     scene.eevee.taa_render_samples = scene.cycles.samples = 32
-    camera = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    camera.matrix_world = mathutils.Matrix.LocRotScale((0, -3.2, 1.2), mathutils.Euler((1.2, 0, 0)), None)
+    scene.cycles.device = "CPU"
+    view = auto_views(read_scene(DONUT), 4, width=256, height=256)[0]
+    scene.camera = views.add_camera(view, scene.collection)
     times = {}
     for engine in engines:
         scene.render.engine = engine

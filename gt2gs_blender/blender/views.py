@@ -1,11 +1,12 @@
-"""Blender cameras as 3DGS ``cameras.json`` entries in a splat object's own (PLY) space.
+"""Blender cameras as 3DGS ``cameras.json`` entries in a splat object's own (PLY) space, and back.
 
 Blender cameras look down -z with y up; ``core`` uses OpenCV axes, so the camera-to-world rotation is ``R_cv
 = R_blender @ diag(1, -1, -1)`` (docs/architecture.md, "Conventions"). The PLY lives in the object's local
 space, so each camera is expressed relative to the object: ``inverse(object.matrix_world) @
 camera.matrix_world``, with the scale taken out of the rotation (exact for uniform object scale; a
 non-uniform scale makes the views approximate). Intrinsics follow Blender's sensor fit, lens shift and the
-scene's render resolution.
+scene's render resolution. ``add_camera`` makes the Blender camera that sees what a ``core`` camera sees
+(the display's fidelity test and bench render the project's own views with it).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from typing import Any
 import numpy as np
 
 BLENDER_TO_CV = np.diag([1.0, -1.0, -1.0])
+SENSOR_WIDTH_MM = 36.0
+"""The sensor width ``add_camera`` gives its cameras (Blender's default), fitted horizontally."""
 
 
 class ViewError(ValueError):
@@ -94,3 +97,27 @@ def camera_entries(cameras: Iterable[Any], scene, object_to_world: np.ndarray) -
     if not entries:
         raise ViewError("no cameras to use as views")
     return entries
+
+
+def camera_matrix(world_to_cam: np.ndarray) -> np.ndarray:
+    """The Blender ``matrix_world`` (4 x 4) of a camera whose OpenCV world-to-camera transform is ``world_to_cam``."""
+    cam_to_world = np.linalg.inv(np.asarray(world_to_cam, np.float64))
+    matrix = np.eye(4)
+    matrix[:3, :3] = cam_to_world[:3, :3] @ BLENDER_TO_CV
+    matrix[:3, 3] = cam_to_world[:3, 3]
+    return matrix
+
+
+def add_camera(view: Any, collection: Any, name: str | None = None) -> Any:
+    """A new Blender camera object in ``collection`` that sees what ``view`` (a ``core`` camera: square pixels,
+    centred principal point) sees when the scene renders at the view's size."""
+    import bpy
+    import mathutils
+
+    data = bpy.data.cameras.new(name or view.name or "view")
+    data.sensor_fit, data.sensor_width = "HORIZONTAL", SENSOR_WIDTH_MM
+    data.lens = view.fx / view.width * SENSOR_WIDTH_MM
+    obj = bpy.data.objects.new(data.name, data)
+    obj.matrix_world = mathutils.Matrix(camera_matrix(view.world_to_cam).tolist())
+    collection.objects.link(obj)
+    return obj

@@ -17,6 +17,7 @@ bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 torch = pytest.importorskip("torch", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.blender import display
+from gt2gs_blender.blender import views as views_edge
 
 pytestmark = pytest.mark.blender
 
@@ -134,23 +135,6 @@ def _reference(donut):
     return views, out.colors.clamp(0.0, 1.0).numpy(), out.alphas.numpy()
 
 
-def _blender_camera(view):
-    """A Blender camera object matching a core Camera (square pixels, centred principal point)."""
-    import mathutils
-
-    data = bpy.data.cameras.new(view.name or "view")
-    data.sensor_fit, data.sensor_width = "HORIZONTAL", 36.0
-    data.lens = view.fx / view.width * data.sensor_width
-    obj = bpy.data.objects.new(data.name, data)
-    cam_to_world = np.linalg.inv(view.world_to_cam)
-    matrix = np.eye(4)
-    matrix[:3, :3] = cam_to_world[:3, :3] @ np.diag([1.0, -1.0, -1.0])
-    matrix[:3, 3] = cam_to_world[:3, 3]
-    obj.matrix_world = mathutils.Matrix(matrix.tolist())
-    bpy.context.scene.collection.objects.link(obj)
-    return obj
-
-
 def _white_world(scene):
     world = bpy.data.worlds.new("white")
     scene.world = world
@@ -188,7 +172,7 @@ def _render_views(engine, views, folder, filter_px):
     scene.cycles.filter_width = filter_px
     images = []
     for i, view in enumerate(views):
-        scene.camera = _blender_camera(view)
+        scene.camera = views_edge.add_camera(view, bpy.context.scene.collection)
         scene.render.filepath = str(folder / f"{engine.lower()}_{filter_px}px_view{i}.png")
         bpy.ops.render.render(write_still=True)
         print("render:", scene.render.filepath)

@@ -293,6 +293,23 @@ def test_scene_cameras_become_views_in_object_space(fresh):
     assert np.allclose(uv[1], (160 + camera.fx / 5, 120 - camera.fy * 0.5 / 5))  # right and up on screen
 
 
+def test_a_core_camera_becomes_a_blender_camera_that_sees_the_same(fresh):
+    """add_camera then camera_entries gives back the core camera: same size, focal length and projection."""
+    from gt2gs_blender.core.cameras.generate import look_at
+
+    scene = fresh.context.scene
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 200, 120, 100
+    view = look_at((1.0, -3.0, 2.0), (0.2, 0.1, 0.0), width=200, height=120, fov_deg=50.0, up=(0.0, 0.0, 1.0))
+    obj = views.add_camera(view, scene.collection, "first view")
+    fresh.context.view_layer.update()
+    path = Path(tempfile.mkdtemp()) / "cameras.json"
+    path.write_text(__import__("json").dumps(views.camera_entries([obj], scene, np.eye(4))))
+    (back,) = load_cameras_json(path)
+    points = np.array([[0.0, 0.0, 0.0], [0.5, -0.3, 0.4], [-0.4, 0.6, -0.2]])
+    assert (back.width, back.height) == (200, 120) and np.isclose(back.fx, view.fx)
+    assert np.allclose(back.project(points)[0], view.project(points)[0], atol=1e-6)
+
+
 def test_panel_settings_and_keywords_become_the_job_config(fresh):
     from gt2gs_blender.core.transfer.presets import PRESETS
     from gt2gs_blender.core.transfer.presets import preset as make_preset
