@@ -222,6 +222,37 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     assert np.abs(preview.astype(np.float32) - expected).max() <= 1.0
 
 
+def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
+    """A run with no steps is its preview (preview_ssim ~1); a flat grey picture of the same view is not."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.metrics import preview_ssim
+
+    scene, cam = wall(n=80, tilt_deg=20.0), front_camera(96)
+    texture = stripes(period=32, size=128)
+    config = wall_config(
+        shared, tmp_path, stylise_steps=0, correct_steps=0, texture_repeats=3.0, evaluate=True, color_transfer=False
+    )
+    result = transfer(scene, texture, [cam], config)
+    assert result.report["metrics"]["preview_ssim"] >= 0.99
+    flat = np.full((96, 96, 3), 128, np.uint8)
+    assert preview_ssim(result.scene, flat, cam, torch.ones(3)) < 0.1
+
+
+def test_the_sketch_preview_takes_the_texture_size_the_run_derives(shared, tmp_path):
+    """With the layout off and Texture Repeats set, the screen-space preview shows the bars at the repeat the
+    run will use (not at the config's own texture height)."""
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+
+    scene, cam = wall(n=100), front_camera(96)
+    config = wall_config(shared, tmp_path, layout=False, texture_repeats=2.0, texture_height=256)
+    image = preview(scene, stripes(period=32, size=128), [cam], config, size=96)
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    height = texture_height_for(layout_frame(scene, views, config), views, config.n_scales)
+    grey = image.astype(np.float32).mean(-1)[20:-20, 20:-20].mean(0)
+    spectrum = np.abs(np.fft.rfft(grey - grey.mean()))
+    assert height < 128 and len(grey) / int(np.argmax(spectrum)) == pytest.approx(height / 0.5 / 4, rel=0.2)
+
+
 def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():
     """The ideal per-view image of the layout has the bars' period on screen; the layout loss is 0 on
     it whatever lies off the surface, and grows with a change on the surface."""

@@ -149,10 +149,10 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
 
 
 def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
-    """Render the orientation preview of the first view as a PNG."""
+    """Render the preview of the first view (what the run will lay on the scene) as a PNG."""
     from ..core.cameras.generate import auto_views
     from ..core.scene.files import read_scene
-    from ..core.transfer.orientation_preview import layout_preview, orientation_preview
+    from ..core.transfer.orientation_preview import preview
     from .images import write_png
     from .jobs import read_texture
 
@@ -160,36 +160,12 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
     config = _config(spec)
     views = _views(spec)
     _prepare_kernel(config, lambda p: _send(events, p), cancel)
-    camera = (
-        views[0]
+    cameras = (
+        views
         if isinstance(views, list)
-        else auto_views(scene, views or config.n_views, width=spec.preview_size, height=spec.preview_size)[0]
+        else auto_views(scene, views or config.n_views, width=config.resolution, height=config.resolution)
     )
-    if config.layout:
-        cameras = (
-            views
-            if isinstance(views, list)
-            else auto_views(scene, views or config.n_views, width=config.resolution, height=config.resolution)
-        )
-        write_png(
-            spec.output, layout_preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size)
-        )
-        events("done", output=str(spec.output), report=None)
-        return
-    image = orientation_preview(
-        scene,
-        read_texture(spec.texture),
-        camera,
-        config.angle,
-        size=spec.preview_size,
-        resolution=config.resolution,
-        texture_height=config.texture_height,
-        n_groups=config.n_scales if config.depth_groups else 1,
-        depth_ratio=config.depth_ratio,
-        background=config.background,
-        backend=config.backend,
-    )
-    write_png(spec.output, image)
+    write_png(spec.output, preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size))
     events("done", output=str(spec.output), report=None)
 
 

@@ -68,6 +68,8 @@ def report_rows(
         rows.append(("Texture Match", f"{metrics['texture_match_start']:.3f} → {metrics['texture_match']:.3f}"))
     if metrics.get("ssim") is not None:
         rows.append(("Shape Kept (SSIM)", f"{metrics['ssim']:.3f}"))
+    if metrics.get("preview_ssim") is not None:
+        rows.append(("Like the Preview (SSIM)", f"{metrics['preview_ssim']:.3f}"))
     return rows
 
 

@@ -358,7 +358,7 @@ def test_transfer_view_in_each_state():
         "image_size": [128, 128],
         "device": "cpu",
         "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
-        "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81},
+        "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81, "preview_ssim": 0.62},
     }
     outcome = transfer_run.Outcome(DONE, "done in 15 s", report, "donut GT²", 15.2, mode="IN_PLACE")
     done = transfer_view("donut", None, outcome)
@@ -368,6 +368,7 @@ def test_transfer_view_in_each_state():
     assert rows["Result"] == "'donut GT²' (no longer in the file)" and rows["Splats"] == "45,624"
     assert rows["Views"] == "8 at 128×128" and rows["Shape Kept (SSIM)"] == "0.810"
     assert rows["Texture Match"] == "0.300 → 0.200" and rows["Weights"] == "vgg19_norm_relu3"
+    assert rows["Like the Preview (SSIM)"] == "0.620"
     assert result_view(None, "", "").message == NO_RUN_TEXT
     error_outcome = transfer_run.Outcome(ERROR, "the worker process exited with status 1")
     error = transfer_view("donut", None, error_outcome)

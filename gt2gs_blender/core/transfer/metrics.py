@@ -7,6 +7,9 @@
   both views, not occluded, inside the source) by RMSE and LPIPS-Alex, averaged over pairs.
 - ``texture_match``: mean cosine distance of each rendered feature cell the object covers to its
   nearest texture-bank feature (lower = closer to the texture; background cells are left out).
+- ``preview_ssim``: whether the preview predicted the run: SSIM of the luminance of the result's render and
+  the preview of the first view (``orientation_preview.preview``), over the pixels the result covers
+  (1 = the picture the artist approved; the original scene's detail or grain in its place lowers it).
 - render FPS and peak memory.
 Images are channels-last (V,H,W,3) in [0, 1], as the rasterizer renders them.
 """
@@ -17,6 +20,7 @@ import sys
 import time
 from collections.abc import Sequence
 
+import numpy as np
 import torch
 
 from ..cameras.camera import Camera
@@ -25,12 +29,16 @@ from ..features.extractor import FeatureExtractor
 from ..features.lpips import LPIPS
 from ..render import render
 from ..scene.gaussians import GaussianScene
-from ..train.ssim import ssim
+from ..train.ssim import WINDOW, ssim, ssim_map
 from .losses import cosine_distance, nearest_features
 from .texture_bank import covered_cells
 
 SHORT_RANGE = 1
 LONG_RANGE = 7
+LUMA = (0.2126, 0.7152, 0.0722)
+"""Rec. 709 luminance weights (the preview's shading, and ``preview_ssim``: structure, not colour)."""
+COVERED = 0.5
+"""Pixels the result covers at least this much count in ``preview_ssim``."""
 BLOCK_BYTES = 64 * 2**20
 """Largest similarity block texture_match builds at once."""
 
@@ -39,6 +47,22 @@ BLOCK_BYTES = 64 * 2**20
 def content_ssim(stylised: torch.Tensor, original: torch.Tensor) -> float:
     """Mean over views of SSIM(stylised render, original render), (V,H,W,3) each."""
     return float(ssim(stylised, original).mean())
+
+
+@torch.no_grad()
+def preview_ssim(
+    result: GaussianScene, preview: np.ndarray, camera: Camera, background: torch.Tensor, backend: str = "auto"
+) -> float | None:
+    """SSIM of the luminance of ``result`` rendered from ``camera`` and ``preview`` (H, W, 3 uint8 of that
+    view at the camera's size) over the windows centred on pixels the result covers; None when it covers none."""
+    out = render(result.detach(), [camera], background=background, backend=backend)
+    luma = torch.tensor(LUMA, dtype=out.colors.dtype, device=out.colors.device)
+    image = out.colors[0].clamp(0.0, 1.0) @ luma
+    shown = torch.from_numpy(np.ascontiguousarray(preview)).to(out.colors) / 255.0 @ luma
+    per_window = ssim_map(image[..., None], shown[..., None])[0, 0]
+    half = WINDOW // 2
+    covered = out.alphas[0][half:-half, half:-half] > COVERED
+    return float(per_window[covered].mean()) if bool(covered.any()) else None
 
 
 @torch.no_grad()

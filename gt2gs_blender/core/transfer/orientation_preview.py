@@ -1,5 +1,9 @@
 """A quick picture of how the texture will lie on the scene at a chosen orientation angle.
 
+``preview`` is the one entry point (the worker's preview job and the run's preview agreement use it):
+with ``layout`` on it is ``layout_preview``, the texture laid out exactly as the run lays it; otherwise
+``orientation_preview``, the screen-space sketch below, at the texture size the run will use.
+
 The first view is rendered once; over the pixels the scene covers, the texture is laid out rotated
 by the angle (counter-clockwise on screen, the texture bank's convention) and scaled per depth
 group as the texture bank scales it (nearest group largest, by the view's own depth ratio unless
@@ -23,7 +27,8 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import add_detail, lay_out, layout_frame
+from .layout import add_detail, lay_out, layout_frame, texture_height_for
+from .metrics import LUMA
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
 from .views import render_views
@@ -76,7 +81,7 @@ def orientation_preview(
     covered = groups >= 0
 
     colour = premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]
-    luminance = colour @ np.array([0.2126, 0.7152, 0.0722], np.float32)
+    luminance = colour @ np.array(LUMA, np.float32)
     bright = float(np.quantile(luminance[covered], 0.95)) if covered.any() else 1.0
     shade = SHADE_FLOOR + (1.0 - SHADE_FLOOR) * np.clip(luminance / max(bright, 1e-6), 0.0, 1.0)
 
@@ -105,7 +110,7 @@ def layout_preview(
     """(H, W, 3) uint8: the first of ``cameras`` showing the scene with the texture laid out exactly
     as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
-    background = torch.tensor(config.background, dtype=scene.dtype)
+    background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
     run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
     views = render_views(scene.detach(), run_cameras, background, config.backend)
     frame = layout_frame(scene, views, config)
@@ -115,3 +120,37 @@ def layout_preview(
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=background, backend=config.backend)
     return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
+@torch.no_grad()
+def preview(
+    scene: GaussianScene,
+    texture: np.ndarray | str | os.PathLike,
+    cameras: Sequence[Camera],
+    config: TransferConfig,
+    *,
+    size: int = 256,
+) -> np.ndarray:
+    """(H, W, 3) uint8 of the first of ``cameras`` (the run's views): what a run with ``config`` will lay on
+    ``scene``; with ``texture_repeats`` set, the sketch takes the texture size the run derives from it."""
+    if config.layout:
+        return layout_preview(scene, texture, cameras, config, size=size)
+    height = config.texture_height
+    if config.texture_repeats > 0:
+        background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
+        run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
+        views = render_views(scene.detach(), run_cameras, background, config.backend)
+        height = texture_height_for(layout_frame(scene, views, config), views, config.n_scales)
+    return orientation_preview(
+        scene,
+        texture,
+        cameras[0],
+        config.angle,
+        size=size,
+        resolution=config.resolution,
+        texture_height=height,
+        n_groups=config.n_scales if config.depth_groups else 1,
+        depth_ratio=config.depth_ratio,
+        background=config.background,
+        backend=config.backend,
+    )

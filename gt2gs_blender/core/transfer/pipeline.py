@@ -29,6 +29,8 @@ from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
 from .layout import add_detail, lay_out, layout_frame, layout_images, texture_height_for
+from .metrics import preview_ssim
+from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start
 from .skips import Plateau, redundant_views
 from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
@@ -158,6 +160,7 @@ def _transfer(
     """The body of :func:`transfer`."""
     torch.manual_seed(config.seed)
     device = resolve_device(config.device)
+    asked = config  # before the run derives its texture height: what the preview was made with
 
     tracker.begin("prepare")
     image = _load_texture(texture)
@@ -233,6 +236,8 @@ def _transfer(
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
         metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
+        shown = preview(original, image, cameras, asked, size=max(cameras[0].width, cameras[0].height))
+        metrics["preview_ssim"] = preview_ssim(work, shown, cameras[0], background, config.backend)
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
     report["stylise"] = {
