@@ -363,4 +363,4 @@ def setup_scene(scene: bpy.types.Scene) -> None:
     scene.cycles.transparent_max_bounces = max(scene.cycles.transparent_max_bounces, TRANSPARENT_BOUNCES)
     scene.cycles.min_transparent_bounces = scene.cycles.transparent_max_bounces
     scene.eevee.use_taa_reprojection = False  # reprojection smears blended surfaces between samples
-    scene.display.shading.color_type = "VERTEX"  # Workbench/Solid: the colour attribute
+    scene.display.shading.color_type = "OBJECT"  # Workbench: each splat object in its mean colour

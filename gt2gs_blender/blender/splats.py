@@ -113,6 +113,7 @@ def scene_to_object(
 
         obj = bpy.data.objects.new(name, mesh)
         created.append(obj)
+        obj.color = object_colour(colors)
         # Convert in the scene's own collection, which is always in the view layer and visible, then
         # move the object to its collection (which may be hidden or excluded).
         master = bpy.context.scene.collection
@@ -185,6 +186,17 @@ def splat_colors(sh_dc: np.ndarray, opacity_logits: np.ndarray) -> np.ndarray:
     with np.errstate(over="ignore"):
         rgba[:, 3] = 1.0 / (1.0 + np.exp(-opacity_logits.astype(np.float32).reshape(-1)))
     return rgba
+
+
+def object_colour(colors: np.ndarray) -> tuple[float, float, float, float]:
+    """The object's viewport colour: the opacity-weighted mean of its splats' (N,4) linear RGBA, opaque; what
+    Solid mode's Object colour shows (it cannot read per-splat colours from the display's generated quads)."""
+    weights = colors[:, 3].astype(np.float64)
+    total = float(weights.sum())
+    if not np.isfinite(total) or total <= 0.0:
+        return (0.8, 0.8, 0.8, 1.0)
+    mean = (colors[:, :3].astype(np.float64) * weights[:, None]).sum(0) / total
+    return (*(float(c) for c in np.clip(mean, 0.0, 1.0)), 1.0)
 
 
 def display_radii(log_scales: np.ndarray, means: np.ndarray) -> np.ndarray:

@@ -386,6 +386,7 @@ def apply_result(context, object_name: str, path: str, mode: str):
         context.view_layer.objects.active = made
         return made
     old, cloud = source.data, made.data
+    source.color = made.color[:]  # the restyled splats' mean colour (Solid mode's Object colour)
     bpy.data.objects.remove(made)
     source.data = cloud
     if old.users == 0:
