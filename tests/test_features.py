@@ -235,6 +235,17 @@ def test_download_only_on_request(isolated, monkeypatch, vgg16_file):
     assert resolved.spec is VGG16_RELU3 and resolved.weights_file == isolated / VGG16_FILE
 
 
+def test_a_corrupt_download_is_refused_and_leaves_no_file(isolated, monkeypatch, tmp_path):
+    """The real downloader (torch.hub, here over a file:// URL): content that does not match the published
+    hash is refused with the URL in the message, and nothing is left in the weights cache."""
+    served = tmp_path / "served.pth"
+    served.write_bytes(b"not the VGG-16 weights" * 4096)
+    monkeypatch.setattr(weights_mod, "VGG16_URL", served.as_uri())
+    with pytest.raises(GT2GSError, match="could not download file://"):
+        weights_mod.download_vgg16(True)
+    assert not [p for p in weights_mod.hub_checkpoint_dir().rglob("*") if p.is_file()]
+
+
 # -- mixed precision -----------------------------------------------------------------------------------
 def test_float16_convolutions_stay_close_to_float32(shared, monkeypatch):
     """The accuracy behind mixed precision on CUDA, measured with the same autocast on the CPU: real VGG
