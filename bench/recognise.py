@@ -13,7 +13,8 @@ Calibration, in every run (and alone with ``--only-measure``, seconds per scene)
 onto the object (``orientation_preview`` at the preset's resolution, texture heights ``--projected-heights``)
 must rank near the top, and the original untransferred scene must not (the null case). With ``layout`` on,
 a ``layout-start`` row too: the scene with the texture laid out exactly as the run starts from it (before any
-optimisation), rendered from the held-out views (with several presets, ``<preset>-layout-start``).
+optimisation), rendered from the held-out views (with several presets, ``<preset>-layout-start``), and a
+``layout-surface`` row: that layout on an exact surface, no splats (``layout_surface``), the most splats can show.
 
 From the preview: every result's held-out renders are compared image to image with the preview of the same
 views (``recognise_measure.pair_distance``: window by window, both measures, no scale or rotation search),
@@ -51,7 +52,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
-from recognise_scenes import BenchScene, RunStart, layout_start, load_bench_scene, run_start
+from recognise_scenes import BenchScene, RunStart, layout_start, layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.config import _python_type
@@ -264,6 +265,11 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             folder.mkdir(parents=True, exist_ok=True)
             for k, (rgb, _) in enumerate(views):
                 cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+            surface = variant.removesuffix("-start") + "-surface"
+            views = layout_surface(run, bench, texture_path(texture))
+            p = row(name, texture, surface, score(view_stats(views), stats))
+            rows.append(p)
+            sheet[texture].append(tile(views[0][0], ranks_label(p, "surface")))
         first = references[args.presets[0]]
         r.update(preview_fields(from_preview(original_stats, previews[first]), first, starts[args.presets[0]]))
         rows.append(r)
@@ -375,7 +381,8 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
 
 
 def is_transfer(variant: str) -> bool:
-    return variant != "original" and not variant.startswith("projected") and not variant.endswith("layout-start")
+    calibration = variant.startswith("projected") or variant.endswith(("layout-start", "layout-surface"))
+    return variant != "original" and not calibration
 
 
 def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:

@@ -9,7 +9,8 @@ transfer saw.
 
 ``run_start``/``layout_start``: what a run on a scene starts from, from the engine's own pieces (the pipeline's
 prepare stage): the layout's frame from the run's views, and the scene with the texture laid out before any
-optimisation step, to render from the held-out views.
+optimisation step, to render from the held-out views. ``layout_surface``: the same layout on an exact surface
+(no splats), the ceiling of what splats can show of it.
 """
 
 from __future__ import annotations
@@ -25,16 +26,24 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+import numpy as np
 import torch
 
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
 from gt2gs_blender.core.scene.gaussians import concat
 from gt2gs_blender.core.transfer.content import content_and_hidden
-from gt2gs_blender.core.transfer.layout import LayoutFrame, add_detail, lay_out, layout_frame, texture_height_for
+from gt2gs_blender.core.transfer.layout import (
+    LayoutFrame,
+    add_detail,
+    lay_out,
+    layout_frame,
+    layout_images,
+    texture_height_for,
+)
 from gt2gs_blender.core.transfer.region import stylise_start
 from gt2gs_blender.core.transfer.texture import load_texture
-from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras
+from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras, render_views
 
 SHARED = ROOT.parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -135,6 +144,22 @@ def layout_start(run: RunStart, texture: Path) -> GaussianScene:
     if run.config.split_size > 0:
         laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config)
     return laid if hidden is None else concat([run.start.subset(hidden), laid])
+
+
+@torch.no_grad()
+def layout_surface(run: RunStart, bench: BenchScene, texture: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(RGB uint8 over the background, alpha) per held-out view: the layout as an exact surface shows it there
+    (``layout_images`` on the original scene's depth, no splats): the most any splat result of this layout can
+    show, so a rank the surface misses is the layout's (or the measure's), not the splats' or the optimisation's."""
+    assert run.frame is not None and run.config.layout
+    background = torch.tensor(bench.background, dtype=torch.float32)
+    views = render_views(bench.scene.detach(), bench.held_out, background, run.config.backend)
+    out = []
+    for image in layout_images(views, load_texture(texture), run.frame, run.config.angle):
+        rgb, alpha = image[..., :3].cpu().numpy(), image[..., 3].cpu().numpy()
+        over = rgb * alpha[..., None] + (1.0 - alpha[..., None]) * np.asarray(bench.background, np.float32)
+        out.append(((over.clip(0.0, 1.0) * 255 + 0.5).astype(np.uint8), alpha))
+    return out
 
 
 if __name__ == "__main__":
