@@ -19,6 +19,7 @@ from gt2gs_blender.core.transfer.layout import (
     split_coarse,
     surface_normals,
     texture_height_for,
+    with_colours,
 )
 from gt2gs_blender.core.transfer.texture_bank import build_texture_bank, crop_side, tiled_for_crop
 from gt2gs_blender.core.transfer.views import render_views
@@ -153,6 +154,45 @@ def test_layout_lays_the_texture_at_its_repeat_and_angle(angle):
     period_world = 2.0 / int(np.argmax(spectrum))  # the wall is 2 units across
     assert period_world == pytest.approx(frame.repeat / 4, rel=0.15)
     assert across.std() < 0.1 * along.std()  # constant along the bars
+
+
+@pytest.mark.parametrize("tilt", [0.0, 60.0])
+def test_the_view_projection_shows_the_texture_as_the_first_view_does(tilt):
+    """Thrown from the first view, the bars keep their on-screen period on a wall however steeply it is
+    turned (one depth group): the repeat's on-screen size at the nearest depth, 4 bar pairs per repeat."""
+    scene, cam = wall(n=160, tilt_deg=tilt), front_camera(128)
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    config = TransferConfig(texture_repeats=2.0, layout_projection="view", n_scales=1)
+    frame = layout_frame(scene, views, config)
+    assert frame.projector is not None
+    colours = layout_colours(scene, torch.zeros(len(scene), 3), stripes(period=32, size=128), frame, 0.0)
+    out = render(with_colours(scene, colours), [cam], background=torch.ones(3))
+    rows = slice(48, 80)
+    covered = (out.alphas[0][rows] > 0.99).all(0).nonzero().squeeze(1).numpy()  # columns on the wall
+    along = out.colors[0].mean(-1).numpy()[rows, covered[4] : covered[-4]].mean(0)
+    padded = 2048  # zero padding: a finer frequency grid than the wall's few periods give
+    spectrum = np.abs(np.fft.rfft(along - along.mean(), n=padded))
+    repeat_px = texture_height_for(frame, views, 1) / 0.5
+    assert padded / int(np.argmax(spectrum)) == pytest.approx(repeat_px / 4, rel=0.1)
+
+
+def test_auto_projection_throws_from_the_view_for_captures_and_boxes_orbits():
+    """``auto``: cameras that all look the same way (a capture) take the view projection, a ring the box."""
+    from gt2gs_blender.core.cameras.generate import look_at
+    from gt2gs_blender.core.transfer.layout import projection
+
+    UP = (0.0, 1.0, 0.0)
+    capture = [
+        look_at((x, 0.0, -3.0), (0.0, 0.0, 0.0), width=64, height=64, fov_deg=50.0, up=UP) for x in (-0.5, 0.0, 0.5)
+    ]
+    ring = [
+        look_at((3 * math.cos(a), 0.0, 3 * math.sin(a)), (0.0, 0.0, 0.0), width=64, height=64, fov_deg=50.0, up=UP)
+        for a in np.linspace(0.0, 2 * math.pi, 8, endpoint=False)
+    ]
+    assert projection(capture, "auto") == "view" and projection(ring, "auto") == "box"
+    assert projection(ring, "view") == "view" and projection(capture, "box") == "box"
+    with pytest.raises(ValueError, match="layout_projection"):
+        projection(ring, "sphere")
 
 
 def test_texture_height_matches_the_repeat_on_screen():

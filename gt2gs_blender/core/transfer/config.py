@@ -16,6 +16,9 @@ from typing import Any
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
 the farthest group's texture stays half the nearest's size (128 px at the default height), not a smudge."""
+FORWARD_SPREAD_DEG = 45.0
+"""Lay Out Texture's automatic projection is View when every view looks within this angle of the views' mean
+direction (a capture seen from the front), else Box."""
 
 PARTS = {
     "views": "Views",
@@ -102,6 +105,15 @@ class TransferConfig:
         "Lay the texture on the object before optimising (a box projection at the set size and angle), "
         "so planks, bricks and cells show; off: start from the object's own colours, as the paper does",
         "texture",
+    )
+    layout_projection: str = setting(
+        "auto",
+        "Projection",
+        "How Lay Out Texture puts the texture on the scene: Box wraps it around an object seen from all "
+        "sides; View throws it from the first view like a slide projector (a capture seen from the front); "
+        f"Auto: View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",
+        "texture",
+        choices=("auto", "box", "view"),
     )
     texture_repeats: float = setting(
         0.0,

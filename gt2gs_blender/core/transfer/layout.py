@@ -9,6 +9,13 @@ every view agrees on.
   facing ``depth`` shows the texture as the first view shows it, rotated by the start angle.
 - Size: the texture's height spans ``object size / repeats`` in the world, the object's size being
   what the first view sees of it (its covered pixels' box at their median depth).
+- Projection (``layout_projection``): the box suits an object seen from all sides. A capture seen from
+  the front (every view within ``FORWARD_SPREAD_DEG`` of the views' mean direction; ``auto``) takes the
+  view projection instead: the texture thrown from the first view's centre like a slide projector, so
+  every view sees it as the first does, whatever the surfaces' slopes (leaves, floors and walls at once,
+  where the box cut a fern's leaves into a patchwork of planes). Like the texture bank's depth groups,
+  it shows the texture ``1/r_k`` as large in the farther groups (at most ``MAX_DEPTH_RATIO``), so a
+  nearer surface shows larger texture and depth edges break it.
 - Normals come from the views' rendered depth (blurred, so sprinkles and specks do not flip the
   plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
   sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
@@ -43,7 +50,9 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene, concat, quats_to_rotmats
 from ..scene.inria import SH_C0
-from .config import TransferConfig
+from .bank import bank_depth_ratio
+from .config import FORWARD_SPREAD_DEG, TransferConfig
+from .texture_bank import bank_scales
 from .views import ViewSet
 
 SURFACE_ALPHA = 0.9
@@ -68,14 +77,32 @@ MIN_TEXTURE_HEIGHT = 8
 """The smallest texture height the bank is built at (the config's own minimum)."""
 EXTENT_QUANTILE = 0.02
 """The object's size ignores the 2 % outermost covered pixels on each side (strays, floaters)."""
+NEAREST_PROJECTOR_DEPTH = 0.05
+"""Points nearer the projector than this share of its nearest group's depth (or behind it) read the texture
+as if at that depth, instead of an unbounded magnification."""
+PROJECTIONS = ("auto", "box", "view")
+
+
+@dataclass(frozen=True)
+class Projector:
+    """The view projection: from ``centre`` (the first view's), a point at depth z along the frame's depth
+    axis reads the texture at its right/up offsets times ``near / z``, divided by ``scales[g]`` of its depth
+    group g (``depth_range`` split in ``len(scales)`` equal bins, nearest first: the texture bank's groups)."""
+
+    centre: np.ndarray
+    near: float
+    depth_range: tuple[float, float]
+    scales: tuple[float, ...]
 
 
 @dataclass(frozen=True)
 class LayoutFrame:
-    """The box projection's axes (rows: right, up, depth) and the world size of one texture height."""
+    """The projection's axes (rows: right, up, depth), the world size of one texture height (at the
+    nearest depth group for the view projection) and the view projection's projector (None: the box)."""
 
     axes: np.ndarray
     repeat: float
+    projector: Projector | None = None
 
 
 def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -> LayoutFrame:
@@ -97,8 +124,40 @@ def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -
     axes = np.stack([right, up, depth])
     if config.texture_repeats <= 0:
         repeat = config.texture_height / RENDER_SCALE * _nearest_depth(views, config.n_scales) / cameras[0].fy
-        return LayoutFrame(axes=axes, repeat=repeat)
-    return LayoutFrame(axes=axes, repeat=_seen_size(scene, cameras[0], config.backend) / config.texture_repeats)
+    else:
+        repeat = _seen_size(scene, cameras[0], config.backend) / config.texture_repeats
+    projector = _projector(views, config) if projection(cameras, config.layout_projection) == "view" else None
+    return LayoutFrame(axes=axes, repeat=repeat, projector=projector)
+
+
+def projection(cameras: Sequence[Camera], choice: str) -> str:
+    """``box`` or ``view``: ``choice`` itself, or for ``auto`` the view projection when every camera looks
+    within ``FORWARD_SPREAD_DEG`` of the cameras' mean direction (a capture seen from the front)."""
+    if choice not in PROJECTIONS:
+        raise ValueError(f"layout_projection must be one of {', '.join(PROJECTIONS)}, got {choice!r}")
+    if choice != "auto":
+        return choice
+    forwards = np.stack([c.world_to_cam[2, :3] for c in cameras])
+    mean = forwards.sum(axis=0)
+    if np.linalg.norm(mean) < 1e-9:
+        return "box"
+    spread = forwards @ (mean / np.linalg.norm(mean))
+    return "view" if float(spread.min()) >= math.cos(math.radians(FORWARD_SPREAD_DEG)) else "box"
+
+
+def _projector(views: ViewSet, config: TransferConfig) -> Projector:
+    """The view projection's projector: the first view's centre, the depth groups the texture bank uses."""
+    z = torch.cat([expected_depth(d, a, SURFACE_ALPHA)[a >= SURFACE_ALPHA] for d, a in zip(views.depths, views.alphas)])
+    if not len(z):
+        raise GT2GSError("no view sees the object: nothing to lay the texture on")
+    groups = config.n_scales if config.depth_groups else 1
+    ratio = bank_depth_ratio(views, config) if groups > 1 else 1.0
+    return Projector(
+        centre=np.asarray(views.cameras[0].center, np.float64),
+        near=_nearest_depth(views, config.n_scales),
+        depth_range=(float(z.min()), float(z.max())),
+        scales=bank_scales(groups, (1.0, max(ratio, 1.0))),
+    )
 
 
 @torch.no_grad()
@@ -197,6 +256,13 @@ def surface_normals(
     return _fill_unseen(means, normals, best >= 0).float().to(scene.device)
 
 
+def _normals_for(scene: GaussianScene, views: ViewSet, frame: LayoutFrame) -> torch.Tensor:
+    """The splats' normals the frame's projection needs: the surface's for the box, none (zeros) for the view."""
+    if frame.projector is not None:
+        return torch.zeros(len(scene), 3, dtype=scene.dtype, device=scene.device)
+    return surface_normals(scene, views.cameras, views.depths, views.alphas)
+
+
 def _normal_map(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor) -> tuple[torch.Tensor, ...]:
     """Per pixel: the unit normal facing the camera (H,W,3), its cosine to the ray (H,W) and
     whether the pixel and its blurred neighbourhood are opaque surface (H,W)."""
@@ -266,30 +332,49 @@ def project_texture(
     angle_deg: float,
     footprint: torch.Tensor | float,
 ) -> torch.Tensor:
-    """(N, 3) RGB of the box projection at world ``points`` with ``normals``; each point reads the
-    texture blurred by ``PREFILTER`` x its ``footprint`` (a world length, per point or one for all),
-    the nearest of a pyramid of blurs, so nothing finer than a splat aliases and nothing coarser is lost."""
+    """(N, 3) RGB of the frame's projection at world ``points`` with ``normals`` (the box blends its planes
+    by them; the view projection ignores them); each point reads the texture blurred by ``PREFILTER`` x its
+    ``footprint`` (a world length, per point or one for all) as the projection scales it, the nearest of a
+    pyramid of blurs, so nothing finer than a splat aliases and nothing coarser is lost."""
     height = texture.shape[0]
     world_per_px = frame.repeat / height
-    axes = torch.from_numpy(frame.axes).to(points)
-    local = points @ axes.T  # (N, 3): right, up, depth
-    facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
-    weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
-    blur = PREFILTER * torch.as_tensor(footprint, dtype=local.dtype, device=local.device) / world_per_px
+    planes, scale = _planes(points, normals, frame)
+    blur = PREFILTER * torch.as_tensor(footprint, dtype=scale.dtype, device=scale.device) * scale / world_per_px
     level = torch.log2(blur.clamp_min(0.5) / 0.5).round().clamp(0, PYRAMID_LEVELS - 1).long().expand(len(points))
-    planes = (  # (horizontal, vertical) texture axes of the planes facing right, up and depth
-        (local[:, 2], local[:, 1]),
-        (local[:, 0], local[:, 2]),
-        (local[:, 0], local[:, 1]),
-    )
-    colours = torch.zeros(len(points), 3, dtype=local.dtype, device=local.device)
+    colours = torch.zeros(len(points), 3, dtype=scale.dtype, device=scale.device)
     for k in level.unique().tolist():
         rows = (level == k).nonzero().squeeze(1)
         image = cv2.GaussianBlur(texture, (0, 0), 0.5 * 2.0**k) if k > 0 else texture
-        for p, (h, v) in enumerate(planes):
+        for h, v, weight in planes:
             sampled = _sample(image, h[rows] / world_per_px, -v[rows] / world_per_px, angle_deg)
-            colours[rows] += weights[rows, p : p + 1] * sampled
+            colours[rows] += weight[rows, None] * sampled
     return colours.clamp(0.0, 1.0)
+
+
+def _planes(
+    points: torch.Tensor, normals: torch.Tensor, frame: LayoutFrame
+) -> tuple[list[tuple[torch.Tensor, ...]], torch.Tensor]:
+    """The projection's (horizontal, vertical, weight) texture coordinates per plane (world lengths at the
+    repeat's scale), and per point how much the projection magnifies a world length there."""
+    axes = torch.from_numpy(frame.axes).to(points)
+    if frame.projector is not None:
+        p = frame.projector
+        local = (points - torch.from_numpy(p.centre).to(points)) @ axes.T
+        z = local[:, 2].clamp_min(NEAREST_PROJECTOR_DEPTH * p.near)
+        lo, hi = p.depth_range
+        bins = len(p.scales)
+        group = ((z - lo) / max(hi - lo, 1e-12) * bins).floor().clamp(0, bins - 1).long()
+        scale = p.near / z / torch.tensor(p.scales, dtype=points.dtype, device=points.device)[group]
+        return [(local[:, 0] * scale, local[:, 1] * scale, torch.ones_like(scale))], scale
+    local = points @ axes.T  # (N, 3): right, up, depth
+    facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
+    weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
+    planes = [  # the planes facing right, up and depth
+        (local[:, 2], local[:, 1], weights[:, 0]),
+        (local[:, 0], local[:, 2], weights[:, 1]),
+        (local[:, 0], local[:, 1], weights[:, 2]),
+    ]
+    return planes, torch.ones(len(points), dtype=points.dtype, device=points.device)
 
 
 def _sample(texture: np.ndarray, x: torch.Tensor, y: torch.Tensor, angle_deg: float) -> torch.Tensor:
@@ -330,7 +415,7 @@ def lay_out(
 ) -> GaussianScene:
     """``scene`` with the texture laid on ``rows`` (all when None) in ``frame``: what the optimisation starts from."""
     part = scene if rows is None else scene.subset(rows)
-    normals = surface_normals(part, views.cameras, views.depths, views.alphas)
+    normals = _normals_for(part, views, frame)
     laid = with_colours(part, layout_colours(part, normals, texture, frame, config.angle))
     if rows is None:
         return laid
@@ -358,7 +443,7 @@ def add_detail(
     part = scene if rows is None else scene.subset(rows)
     change = part.base_colors - (start_colours if rows is None else start_colours[rows]).to(part.sh_dc)
     fine, source = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
-    normals = surface_normals(fine, views.cameras, views.depths, views.alphas)
+    normals = _normals_for(fine, views, frame)
     colours = layout_colours(fine, normals, texture, frame, config.angle) + change[source]
     fine = replace(fine, sh_dc=((colours.clamp(0.0, 1.0) - 0.5) / SH_C0).to(fine.sh_dc))
     if rows is None:

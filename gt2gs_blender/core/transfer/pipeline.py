@@ -201,7 +201,8 @@ def _transfer(
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
             work = lay_out(work, region, content, image, frame, config)
-            laid_out = {"repeat_world": frame.repeat, "splats": len(work), "split": 0}
+            projection = "box" if frame.projector is None else "view"
+            laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
     if config.layout and config.lambda_layout > 0:
         ideal = layout_images(used, image, frame, config.angle)
