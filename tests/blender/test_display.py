@@ -175,12 +175,9 @@ def _read_png(path):
 
 def object_ssim(image, reference, alpha):
     """Mean SSIM over the windows centred on object pixels (rasterizer alpha > 0.5)."""
-    from gt2gs_blender.core.train.ssim import WINDOW, ssim_map
+    from gt2gs_blender.core.transfer.metrics import masked_ssim
 
-    half = WINDOW // 2
-    per_window = ssim_map(torch.from_numpy(image), torch.from_numpy(reference))[0].mean(0).numpy()
-    mask = alpha[half:-half, half:-half] > 0.5
-    return float(per_window[mask].mean())
+    return masked_ssim(torch.from_numpy(image), torch.from_numpy(reference), torch.from_numpy(alpha > 0.5))
 
 
 def _render_views(engine, views, folder, filter_px):

@@ -54,15 +54,22 @@ def preview_ssim(
     result: GaussianScene, preview: np.ndarray, camera: Camera, background: torch.Tensor, backend: str = "auto"
 ) -> float | None:
     """SSIM of the luminance of ``result`` rendered from ``camera`` and ``preview`` (H, W, 3 uint8 of that
-    view at the camera's size) over the windows centred on pixels the result covers; None when it covers none."""
+    view at the camera's size) over the pixels the result covers; None when it covers none."""
     out = render(result.detach(), [camera], background=background, backend=backend)
     luma = torch.tensor(LUMA, dtype=out.colors.dtype, device=out.colors.device)
     image = out.colors[0].clamp(0.0, 1.0) @ luma
     shown = torch.from_numpy(np.ascontiguousarray(preview)).to(out.colors) / 255.0 @ luma
-    per_window = ssim_map(image[..., None], shown[..., None])[0, 0]
+    return masked_ssim(image[..., None], shown[..., None], out.alphas[0] > COVERED)
+
+
+@torch.no_grad()
+def masked_ssim(image: torch.Tensor, reference: torch.Tensor, covered: torch.Tensor) -> float | None:
+    """Mean SSIM of two (H, W, C) images over the windows centred on ``covered`` (H, W) pixels: an object's
+    likeness without the background around it; None when no window is centred on a covered pixel."""
+    per_window = ssim_map(image, reference)[0].mean(0)
     half = WINDOW // 2
-    covered = out.alphas[0][half:-half, half:-half] > COVERED
-    return float(per_window[covered].mean()) if bool(covered.any()) else None
+    inside = covered[half:-half, half:-half].to(per_window.device)
+    return float(per_window[inside].mean()) if bool(inside.any()) else None
 
 
 @torch.no_grad()
