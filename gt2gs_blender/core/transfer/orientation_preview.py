@@ -27,11 +27,11 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import add_detail, lay_out, layout_frame, texture_height_for
+from .layout import LayoutFrame, add_detail, lay_out, layout_frame, texture_height_for
 from .metrics import LUMA
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
-from .views import render_views
+from .views import ViewSet, render_views
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -110,16 +110,21 @@ def layout_preview(
     """(H, W, 3) uint8: the first of ``cameras`` showing the scene with the texture laid out exactly
     as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
-    background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
-    run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
-    views = render_views(scene.detach(), run_cameras, background, config.backend)
-    frame = layout_frame(scene, views, config)
+    views, frame = _run_frame(scene, cameras, config)
     laid = lay_out(scene.detach(), None, views, image, frame, config)
     if config.split_size > 0:
         laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
-    out = render(laid, [cam], background=background, backend=config.backend)
+    out = render(laid, [cam], background=views.background, backend=config.backend)
     return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+
+
+def _run_frame(scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig) -> tuple[ViewSet, LayoutFrame]:
+    """The run's views of ``scene`` (``cameras`` at the run's resolution) and the layout frame they give."""
+    background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
+    run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
+    views = render_views(scene.detach(), run_cameras, background, config.backend)
+    return views, layout_frame(scene, views, config)
 
 
 @torch.no_grad()
@@ -137,10 +142,8 @@ def preview(
         return layout_preview(scene, texture, cameras, config, size=size)
     height = config.texture_height
     if config.texture_repeats > 0:
-        background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
-        run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
-        views = render_views(scene.detach(), run_cameras, background, config.backend)
-        height = texture_height_for(layout_frame(scene, views, config), views, config.n_scales)
+        views, frame = _run_frame(scene, cameras, config)
+        height = texture_height_for(frame, views, config.n_scales)
     return orientation_preview(
         scene,
         texture,
