@@ -102,8 +102,8 @@ class TransferConfig:
     layout: bool = setting(
         False,
         "Lay Out Texture",
-        "Lay the texture on the object before optimising (a box projection at the set size and angle), "
-        "so planks, bricks and cells show; off: start from the object's own colours, as the paper does",
+        "Lay the texture on the object before optimising (projected as Projection says, at the set size "
+        "and angle), so planks, bricks and cells show; off: start from the object's own colours, as the paper does",
         "texture",
     )
     layout_projection: str = setting(
