@@ -39,6 +39,7 @@ from gt2gs_blender.core.transfer.layout import (
     lay_out,
     layout_frame,
     layout_images,
+    layout_shade,
     texture_height_for,
 )
 from gt2gs_blender.core.transfer.region import stylise_start
@@ -140,9 +141,10 @@ def layout_start(run: RunStart, texture: Path) -> GaussianScene:
     hidden = run.hidden
     work = run.start if hidden is None else run.start.subset(~hidden)
     image = load_texture(texture)
-    laid = lay_out(work, None, run.content, image, run.frame, run.config)
+    shade = layout_shade(work) if run.config.keep_shading else None
+    laid = lay_out(work, None, run.content, image, run.frame, run.config, shade)
     if run.config.split_size > 0:
-        laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config)
+        laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config, shade)
     return laid if hidden is None else concat([run.start.subset(hidden), laid])
 
 

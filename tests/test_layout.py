@@ -293,6 +293,40 @@ def test_the_sketch_preview_takes_the_texture_size_the_run_derives(shared, tmp_p
     assert height < 128 and len(grey) / int(np.argmax(spectrum)) == pytest.approx(height / 0.5 / 4, rel=0.2)
 
 
+@pytest.mark.parametrize("keep", [True, False])
+def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
+    """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8): the dark
+    half keeps 0.35 + 0.65 x 0.2 / 0.8 of the brightness, the light half all of it (none kept when off); the
+    preview shows exactly the zero-step run, the detail split's children included."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+
+    base, cam = wall(n=80), front_camera(96)
+    left = base.means[:, 0] < 0
+    grey = torch.where(left[:, None], torch.full((len(base), 3), 0.2), torch.full((len(base), 3), 0.8))
+    scene = with_colours(base, grey)
+    white = np.ones((64, 64, 3), np.float32)
+    config = wall_config(
+        shared,
+        tmp_path,
+        stylise_steps=0,
+        correct_steps=0,
+        color_transfer=False,
+        keep_shading=keep,
+        skip_hidden=False,
+        background=(0, 0, 0),
+    )
+    result = transfer(scene, white, [cam], config)
+    colours = result.scene.base_colors.mean(1)
+    on_left = result.scene.means[:, 0] < -0.1
+    on_right = result.scene.means[:, 0] > 0.1
+    dark = 0.35 + 0.65 * 0.2 / 0.8 if keep else 1.0
+    assert float(colours[on_left].mean()) == pytest.approx(dark, abs=0.02)
+    assert float(colours[on_right].mean()) == pytest.approx(1.0, abs=0.02)
+    expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
+
+
 def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():
     """The ideal per-view image of the layout has the bars' period on screen; the layout loss is 0 on
     it whatever lies off the surface, and grows with a change on the surface."""

@@ -86,6 +86,7 @@ def effective_text(name: str, value: Any, info: dict[str, Any] | None = None) ->
 USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "texture_height": lambda s: s.texture_repeats == 0,
     "layout_projection": lambda s: s.layout,
+    "keep_shading": lambda s: s.layout,
     "split_size": lambda s: s.layout,
     "lambda_layout": lambda s: s.layout,
 }

@@ -115,6 +115,13 @@ class TransferConfig:
         "texture",
         choices=("auto", "box", "view"),
     )
+    keep_shading: bool = setting(
+        True,
+        "Keep Light and Shade",
+        "With Lay Out Texture on, darken the texture where the scene is dark, so its shapes stay readable "
+        "under it; off: the texture's own colours everywhere",
+        "texture",
+    )
     texture_repeats: float = setting(
         0.0,
         "Texture Repeats",

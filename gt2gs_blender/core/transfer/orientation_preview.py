@@ -27,7 +27,7 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import LayoutFrame, add_detail, lay_out, layout_frame, texture_height_for
+from .layout import LayoutFrame, add_detail, lay_out, layout_frame, layout_shade, shading, texture_height_for
 from .metrics import LUMA
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
@@ -35,8 +35,6 @@ from .views import ViewSet, render_views
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
-SHADE_FLOOR = 0.35
-"""Darkest shading factor, so dark parts of the scene still show the texture."""
 
 
 def texture_layer(texture: np.ndarray, angle_deg: float, scale: float, width: int, height: int) -> np.ndarray:
@@ -81,9 +79,8 @@ def orientation_preview(
     covered = groups >= 0
 
     colour = premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]
-    luminance = colour @ np.array(LUMA, np.float32)
-    bright = float(np.quantile(luminance[covered], 0.95)) if covered.any() else 1.0
-    shade = SHADE_FLOOR + (1.0 - SHADE_FLOOR) * np.clip(luminance / max(bright, 1e-6), 0.0, 1.0)
+    luminance = torch.from_numpy(colour @ np.array(LUMA, np.float32))
+    shade = shading(luminance, luminance[torch.from_numpy(covered)]).numpy()
 
     nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
     laid = np.zeros((cam.height, cam.width, 3), np.float32)
@@ -111,9 +108,10 @@ def layout_preview(
     as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     views, frame = _run_frame(scene, cameras, config)
-    laid = lay_out(scene.detach(), None, views, image, frame, config)
+    shade = layout_shade(scene) if config.keep_shading else None
+    laid = lay_out(scene.detach(), None, views, image, frame, config, shade)
     if config.split_size > 0:
-        laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config)
+        laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config, shade)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=views.background, backend=config.backend)
     return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)

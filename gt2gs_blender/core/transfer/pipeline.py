@@ -28,7 +28,7 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import add_detail, lay_out, layout_frame, layout_images, texture_height_for
+from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shade, texture_height_for
 from .metrics import preview_ssim
 from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start
@@ -79,6 +79,10 @@ def apply_color_transfer(
     )
 
 
+SHADE_ATTACHMENT = "layout_shade"
+"""The layout's per-splat shade, carried through densification to the detail split."""
+
+
 def stylise(
     scene: GaussianScene,
     views: ViewSet,
@@ -88,11 +92,13 @@ def stylise(
     config: TransferConfig,
     tracker: Tracker,
     frozen: torch.Tensor | None,
-) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats, torch.Tensor]:
+    carried: dict[str, torch.Tensor] | None = None,
+) -> tuple[GaussianScene, torch.Tensor | None, StyliseStats, dict[str, torch.Tensor]]:
     """Run the stylise/correct schedule (module ``stylise``), reporting progress and previews; the
-    scene, its frozen rows (after densification), the counts and each row's starting colour."""
+    scene, its frozen rows (after densification), the counts and its per-row attachments after
+    densification: each row's starting colour (``COLOR_ATTACHMENT``) and the ``carried`` values."""
     order = order_and_link(targets, views.depths, views.alphas)
-    styliser = Styliser(scene, targets, order, bank, extractor, config, views.background, frozen)
+    styliser = Styliser(scene, targets, order, bank, extractor, config, views.background, frozen, carried)
     phases = styliser.phases()
     total, step = sum(n for _, n, _ in phases), 0
     for phase, steps, densify in phases:
@@ -118,7 +124,7 @@ def stylise(
         styliser.scene.detach(),
         None if frozen is None else styliser.opt.frozen.clone(),
         styliser.report,
-        styliser.opt.attachments[COLOR_ATTACHMENT].detach(),
+        {name: value.detach() for name, value in styliser.opt.attachments.items()},
     )
 
 
@@ -177,6 +183,8 @@ def _transfer(
     if hidden is not None:
         work = work.subset(~hidden)
     region = selected if selected is None or hidden is None else selected[~hidden]
+    # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
+    shade = layout_shade(work, region) if config.layout and config.keep_shading else None
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -200,7 +208,7 @@ def _transfer(
         if config.texture_repeats > 0:
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
-            work = lay_out(work, region, content, image, frame, config)
+            work = lay_out(work, region, content, image, frame, config, shade)
             projection = "box" if frame.projector is None else "view"
             laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
@@ -221,14 +229,16 @@ def _transfer(
 
     tracker.begin("stylise")
     frozen = None if region is None else ~region
-    work, frozen, stats, start_colours = stylise(work, used, targets, matching, extractor, config, tracker, frozen)
+    carried = None if shade is None else {SHADE_ATTACHMENT: shade}
+    work, frozen, stats, attached = stylise(work, used, targets, matching, extractor, config, tracker, frozen, carried)
     tracker.end()
 
     tracker.begin("finish")
     restyled = None if frozen is None else ~frozen
     if config.layout and config.split_size > 0:
         n_optimised = len(work)
-        work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config)
+        start_colours, shade = attached[COLOR_ATTACHMENT], attached.get(SHADE_ATTACHMENT)
+        work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config, shade)
         laid_out.update(splats=len(work), split=len(work) - n_optimised)
     if config.color_transfer:
         stylised_views = render_views(work, cameras, background, config.backend)

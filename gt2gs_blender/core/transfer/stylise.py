@@ -115,7 +115,9 @@ class Styliser:
         config: TransferConfig,
         background: torch.Tensor,
         frozen: torch.Tensor | None = None,
+        carried: dict[str, torch.Tensor] | None = None,
     ) -> None:
+        """``carried``: per-splat values that must follow densification (the layout's shade), by name."""
         self.views, self.order, self.bank, self.extractor, self.config = views, order, bank, extractor, config
         self.background = background
         self.extent = camera_extent([v.camera for v in views]) if len(views) > 1 else 1.0
@@ -125,7 +127,11 @@ class Styliser:
             self._lrs(),
             trainable=self.colors,
             frozen=frozen,
-            attachments={COLOR_ATTACHMENT: scene.base_colors.detach(), RATIO_ATTACHMENT: self._ratio_limits(scene)},
+            attachments={
+                COLOR_ATTACHMENT: scene.base_colors.detach(),
+                RATIO_ATTACHMENT: self._ratio_limits(scene),
+                **(carried or {}),
+            },
         )
         self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
         self.stats = DensityStats(len(scene), "color", device=scene.device)
