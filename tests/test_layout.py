@@ -16,6 +16,7 @@ from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.layout import (
     layout_colours,
     layout_frame,
+    layout_images,
     split_coarse,
     surface_normals,
     texture_height_for,
@@ -325,12 +326,19 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     assert float(colours[on_right].mean()) == pytest.approx(1.0, abs=0.02)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
     assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
+    # the layout term's target is shaded the same way, per pixel from the view's own luminance
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, shaded=keep)
+    covered = ideal[..., 3] > 0
+    half = torch.zeros_like(covered)
+    half[:, : 96 // 2 - 6] = True  # the wall's left half on screen, away from the seam
+    assert float(ideal[..., 0][covered & half].mean()) == pytest.approx(dark, abs=0.03)
+    assert float(ideal[..., 0][covered & ~half].max()) == pytest.approx(1.0, abs=0.02)
 
 
 def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():
     """The ideal per-view image of the layout has the bars' period on screen; the layout loss is 0 on
     it whatever lies off the surface, and grows with a change on the surface."""
-    from gt2gs_blender.core.transfer.layout import layout_images
     from gt2gs_blender.core.transfer.losses import layout_loss
 
     scene, cam = wall(n=100), front_camera(96)

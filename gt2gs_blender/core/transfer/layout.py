@@ -316,18 +316,24 @@ def layout_colours(
 
 
 @torch.no_grad()
-def layout_images(views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle_deg: float) -> list[torch.Tensor]:
+def layout_images(
+    views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle_deg: float, shaded: bool = False
+) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
-    the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface)."""
+    the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
+    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance), as the layout lays it."""
     images = []
-    for camera, depth, alpha in zip(views.cameras, views.depths, views.alphas):
+    for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
         z = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA)
         covered = alpha.cpu() >= SURFACE_ALPHA
         points = backproject(z, camera)[covered].float()
         pixel = float(z[covered].median()) / camera.fy if bool(covered.any()) else 0.0
         colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
+        if shaded:
+            seen = premultiplied.cpu()[covered] / alpha.cpu()[covered][:, None]
+            colours = colours * shading(seen.float() @ torch.tensor(LUMA))[:, None].to(colours)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))

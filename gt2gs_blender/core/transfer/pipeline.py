@@ -213,7 +213,7 @@ def _transfer(
             laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
     if config.layout and config.lambda_layout > 0:
-        ideal = layout_images(used, image, frame, config.angle)
+        ideal = layout_images(used, image, frame, config.angle, shaded=shade is not None)
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 
