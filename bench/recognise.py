@@ -23,6 +23,10 @@ untransferred scene, for scale (a result nearer its preview than the original is
 promised). The preview is the layout start when ``layout`` is on, else the screen-space orientation preview
 at the run's texture height (a ``projected-<height>`` row); ``preview_reference`` names it.
 
+Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its
+held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
+the texture (the structure measures reward the texture alone; this is the other side of the trade).
+
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with; ``--reuse`` measures them again instead of transferring when the settings match (and
 ``--reuse-older`` also when the saved settings predate some of today's settings, listed in the row).
@@ -56,6 +60,7 @@ from recognise_scenes import BenchScene, RunStart, layout_start, layout_surface,
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.config import _python_type
+from gt2gs_blender.core.transfer.metrics import masked_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
 
 SHARED = ROOT.parent / "shared"
@@ -126,6 +131,17 @@ def score(views: list[measure.ViewStats], stats: list[measure.TextureStats]) -> 
     """Per measure: each texture's distance, mean over the views."""
     per_view = [measure.distances(v, stats) for v in views]
     return {m: {t.name: float(np.mean([v[m][t.name] for v in per_view])) for t in stats} for m in MEASURES}
+
+
+def content_ssim(views: list[tuple[np.ndarray, np.ndarray]], original: list[tuple[np.ndarray, np.ndarray]]) -> float:
+    """How much of the scene is still there: luminance SSIM of each view to the original's render of it, over
+    the original's object pixels, mean over the views (1: the original; the structure measures ignore it)."""
+    luma = torch.tensor(measure.LUMA)
+    values = []
+    for (rgb, _), (reference, alpha) in zip(views, original, strict=True):
+        a, b = (torch.from_numpy(measure.to_float(x)) @ luma for x in (rgb, reference))
+        values.append(masked_ssim(a[..., None], b[..., None], torch.from_numpy(alpha > measure.MASK_ALPHA)))
+    return float(np.mean([v for v in values if v is not None]))
 
 
 def from_preview(views: list[measure.ViewStats], preview: list[measure.ViewStats]) -> dict[str, float]:
@@ -250,6 +266,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             variant = f"projected-{height}"
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats))
+            p["content_ssim"] = content_ssim(views, original_views)
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
         for preset_name, run in starts.items():
@@ -260,6 +277,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             views = held_out_renders(layout_start(run, texture_path(texture)), bench)
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
+            p["content_ssim"] = content_ssim(views, original_views)
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
             folder.mkdir(parents=True, exist_ok=True)
@@ -268,6 +286,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             surface = variant.removesuffix("-start") + "-surface"
             views = layout_surface(run, bench, texture_path(texture))
             p = row(name, texture, surface, score(view_stats(views), stats))
+            p["content_ssim"] = content_ssim(views, original_views)
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, "surface")))
         first = references[args.presets[0]]
@@ -309,6 +328,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 result_stats = view_stats(views)
                 t = row(name, texture, variant, score(result_stats, stats), seconds)
                 t["features"] = features
+                t["content_ssim"] = content_ssim(views, original_views)
                 t.update(
                     preview_fields(from_preview(result_stats, previews[reference]), reference, starts[preset_name])
                 )
@@ -370,7 +390,7 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
             s[f"top1_{m}"] += r[f"{m}_rank"] == 1
             s[f"top{TOP}_{m}"] += r[f"{m}_rank"] <= TOP
         s[f"top{TOP}_both"] += all(r[f"{m}_rank"] <= TOP for m in MEASURES)
-        for key in ("preview_gram", "preview_gabor", "original_preview_gram", "original_preview_gabor"):
+        for key in ("preview_gram", "preview_gabor", "original_preview_gram", "original_preview_gabor", "content_ssim"):
             if key in r:
                 s.setdefault(f"{key}_values", []).append(r[key])
     for variants in out.values():
@@ -387,7 +407,7 @@ def is_transfer(variant: str) -> bool:
 
 def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
     print(
-        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8}   "
+        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10}   "
         "from preview gram / gabor (original's)"
     )
     for r in rows:
@@ -399,10 +419,13 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
                 preview += f" ({r['original_preview_gram']:.3f} / {r['original_preview_gabor']:.3f})"
             preview += f" vs {r['preview_reference']}"
         print(
-            f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8}   "
-            f"{preview}"
+            f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
+            f"{r.get('content_ssim', 1.0):>10.3f}   {preview}"
         )
-    print(f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor)")
+    print(
+        f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
+        "scene SSIM (how much of the original scene shows; mean)"
+    )
     met: dict[str, bool] = {}
     for scene, variants in summary.items():
         for variant, s in variants.items():
@@ -414,7 +437,8 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
                 )
             print(
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
-                f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']}){preview}"
+                f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
+                f"scene SSIM {s.get('mean_content_ssim', 1.0):.3f}{preview}"
             )
             if is_transfer(variant):
                 met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED

@@ -39,7 +39,7 @@ from gt2gs_blender.core.transfer.layout import (
     lay_out,
     layout_frame,
     layout_images,
-    layout_shade,
+    layout_shading,
     texture_height_for,
 )
 from gt2gs_blender.core.transfer.region import stylise_start
@@ -141,7 +141,7 @@ def layout_start(run: RunStart, texture: Path) -> GaussianScene:
     hidden = run.hidden
     work = run.start if hidden is None else run.start.subset(~hidden)
     image = load_texture(texture)
-    shade = layout_shade(work) if run.config.keep_shading else None
+    shade = layout_shading(work, None, run.frame, run.config)
     laid = lay_out(work, None, run.content, image, run.frame, run.config, shade)
     if run.config.split_size > 0:
         laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config, shade)

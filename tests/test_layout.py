@@ -296,9 +296,10 @@ def test_the_sketch_preview_takes_the_texture_size_the_run_derives(shared, tmp_p
 
 @pytest.mark.parametrize("keep", [True, False])
 def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
-    """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8): the dark
-    half keeps 0.35 + 0.65 x 0.2 / 0.8 of the brightness, the light half all of it (none kept when off); the
-    preview shows exactly the zero-step run, the detail split's children included."""
+    """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8), Shade
+    Softness 0 (each splat its own shade): the dark half keeps 0.35 + 0.65 x 0.2 / 0.8 of the brightness,
+    the light half all of it (none kept when off); the preview shows exactly the zero-step run, the detail
+    split's children included."""
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.transfer.orientation_preview import layout_preview
 
@@ -314,6 +315,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
         correct_steps=0,
         color_transfer=False,
         keep_shading=keep,
+        shade_softness=0.0,
         skip_hidden=False,
         background=(0, 0, 0),
     )
@@ -334,6 +336,67 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     half[:, : 96 // 2 - 6] = True  # the wall's left half on screen, away from the seam
     assert float(ideal[..., 0][covered & half].mean()) == pytest.approx(dark, abs=0.03)
     assert float(ideal[..., 0][covered & ~half].max()) == pytest.approx(1.0, abs=0.02)
+
+
+def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(shared, tmp_path):
+    """The half-dark wall with Shade Softness 0.1 repeat (0.1 world units here): four widths from the seam
+    each half keeps its shade, on the seam the splats and the layout term's image take the shade of the mean
+    luminance 0.5; the preview still shows exactly the zero-step run."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+
+    base, cam = wall(n=80), front_camera(96)
+    left = base.means[:, 0] < 0
+    grey = torch.where(left[:, None], torch.full((len(base), 3), 0.2), torch.full((len(base), 3), 0.8))
+    scene = with_colours(base, grey)
+    white = np.ones((64, 64, 3), np.float32)
+    config = wall_config(
+        shared,
+        tmp_path,
+        stylise_steps=0,
+        correct_steps=0,
+        color_transfer=False,
+        shade_softness=0.1,
+        skip_hidden=False,
+        background=(0, 0, 0),
+    )
+    result = transfer(scene, white, [cam], config)
+    colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
+    dark, seam = 0.35 + 0.65 * 0.2 / 0.8, 0.35 + 0.65 * 0.5 / 0.8
+    assert float(colours[x < -0.4].mean()) == pytest.approx(dark, abs=0.02)
+    assert float(colours[x > 0.4].mean()) == pytest.approx(1.0, abs=0.02)
+    assert float(colours[x.abs() < 0.02].mean()) == pytest.approx(seam, abs=0.03)
+    one_width = 0.35 + 0.65 * (0.2 + 0.6 * 0.1587) / 0.8  # a Gaussian's tail beyond one sigma: 15.87 %
+    assert float(colours[(x + 0.1).abs() < 0.02].mean()) == pytest.approx(one_width, abs=0.03)
+    expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    frame = layout_frame(scene, views, config)
+    (ideal,) = layout_images(views, white, frame, 0.0, True, config.shade_softness * frame.repeat)
+    column = cam.fx * (x / (result.scene.means[:, 2])) + cam.cx  # where each splat's x lands on screen
+    middle = round(float(column[x.abs() < 0.01].mean()))
+    row = ideal[48, :, 0]
+    assert float(row[middle - 1 : middle + 1].mean()) == pytest.approx(seam, abs=0.04)
+    assert float(row[int(cam.cx - 0.4 * cam.fx / 3.0) - 3]) == pytest.approx(dark, abs=0.03)
+    assert float(row[round(cam.cx - 0.1 * cam.fx / 3.0)]) == pytest.approx(one_width, abs=0.04)
+
+
+def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():
+    """Against the float64 brute-force weighted Gaussian average over random points: close at every point;
+    a constant stays that constant exactly; no blur (sigma 0) returns the values."""
+    from gt2gs_blender.core.transfer.layout import spatial_blur
+
+    g = torch.Generator().manual_seed(0)
+    points, values = torch.rand(3000, 3, generator=g), torch.rand(3000, generator=g)
+    weights = torch.rand(3000, generator=g) + 0.1
+    for sigma in (0.05, 0.15):
+        near = torch.exp(-(torch.cdist(points.double(), points.double()) ** 2) / (2 * sigma**2)) * weights.double()
+        oracle = near @ values.double() / near.sum(1)
+        error = (spatial_blur(points, values, weights, sigma).double() - oracle).abs()
+        assert float(error.mean()) < 0.01 and float(error.max()) < 0.04, sigma
+    flat = spatial_blur(points, torch.full((3000,), 0.3), weights, 0.1)
+    assert torch.allclose(flat, torch.full((3000,), 0.3), atol=1e-5)
+    assert torch.equal(spatial_blur(points, values, weights, 0.0), values)
 
 
 def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():

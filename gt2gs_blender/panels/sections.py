@@ -87,6 +87,7 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "texture_height": lambda s: s.texture_repeats == 0,
     "layout_projection": lambda s: s.layout,
     "keep_shading": lambda s: s.layout,
+    "shade_softness": lambda s: s.layout and s.keep_shading,
     "split_size": lambda s: s.layout,
     "lambda_layout": lambda s: s.layout,
 }

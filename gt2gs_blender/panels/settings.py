@@ -30,7 +30,16 @@ def _is_splat(self, obj) -> bool:
     return splats.is_splat_object(obj)
 
 
-PREVIEWED = ("angle", "texture_height", "layout", "texture_repeats", "split_size")
+PREVIEWED = (
+    "angle",
+    "texture_height",
+    "layout",
+    "layout_projection",
+    "keep_shading",
+    "shade_softness",
+    "texture_repeats",
+    "split_size",
+)
 """Settings the orientation preview shows: changing one re-renders it when the user asked for that."""
 
 

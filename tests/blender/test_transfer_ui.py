@@ -525,13 +525,17 @@ def test_automatic_settings_show_the_value_a_run_uses():
 
 
 def test_settings_a_run_ignores_are_greyed_out(fresh):
-    """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on."""
+    """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on,
+    Shade Softness only while Keep Light and Shade is on."""
     from gt2gs_blender.panels.sections import USED_WHEN, setting_used
 
     settings = fresh.context.scene.gt2gs
     assert set(USED_WHEN) <= set(type(settings).__annotations__)
     settings.texture_repeats, settings.layout = 1.5, True
     assert not setting_used(settings, "texture_height") and setting_used(settings, "split_size")
+    assert setting_used(settings, "shade_softness")
+    settings.keep_shading = False
+    assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_shading")
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
     assert setting_used(settings, "angle")

@@ -122,6 +122,16 @@ class TransferConfig:
         "under it; off: the texture's own colours everywhere",
         "texture",
     )
+    shade_softness: float = setting(
+        0.05,
+        "Shade Softness",
+        "With Keep Light and Shade on, how broad the kept light and shade is, in texture repeats (0: every "
+        "speck of the scene's own detail; larger: only its broad light and dark, so the texture's own "
+        "pattern reads, while the scene's shapes fade)",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
     texture_repeats: float = setting(
         0.0,
         "Texture Repeats",

@@ -34,7 +34,9 @@ every view agrees on.
   own original luminance over the bright end of the scene's (floored at ``SHADE_FLOOR``), as the sketch
   preview shades its texture: laid over a whole capture, the plain texture hid the scene (the fern's
   SSIM to the original fell from 0.49 to 0.05). The shade follows each splat through densification
-  (an optimiser attachment) to the detail split's children.
+  (an optimiser attachment) to the detail split's children. ``shade_softness`` first averages the
+  luminance over neighbours within that share of a repeat (``spatial_blur``; the layout term's images
+  blur theirs to match), so only the scene's broad light and dark darkens the texture, not its specks.
 """
 
 from __future__ import annotations
@@ -317,12 +319,18 @@ def layout_colours(
 
 @torch.no_grad()
 def layout_images(
-    views: ViewSet, texture: np.ndarray, frame: LayoutFrame, angle_deg: float, shaded: bool = False
+    views: ViewSet,
+    texture: np.ndarray,
+    frame: LayoutFrame,
+    angle_deg: float,
+    shaded: bool = False,
+    softness: float = 0.0,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
-    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance), as the layout lays it."""
+    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance, blurred over about
+    ``softness``, a world length, at the view's median depth), as the layout lays it."""
     images = []
     for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -332,12 +340,22 @@ def layout_images(
         pixel = float(z[covered].median()) / camera.fy if bool(covered.any()) else 0.0
         colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
         if shaded:
-            seen = premultiplied.cpu()[covered] / alpha.cpu()[covered][:, None]
-            colours = colours * shading(seen.float() @ torch.tensor(LUMA))[:, None].to(colours)
+            seen = _view_luminance(premultiplied.cpu(), alpha.cpu(), softness / pixel if pixel > 0 else 0.0)
+            colours = colours * shading(seen[covered])[:, None].to(colours)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))
     return images
+
+
+def _view_luminance(premultiplied: torch.Tensor, alpha: torch.Tensor, sigma_px: float) -> torch.Tensor:
+    """(H, W) luminance of what a view sees (un-premultiplied), blurred over ``sigma_px`` where it is covered."""
+    coverage = alpha.float().numpy()
+    light = (premultiplied.float() @ torch.tensor(LUMA)).numpy()  # luminance x coverage
+    if sigma_px > 0:
+        light = cv2.GaussianBlur(light, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+        coverage = cv2.GaussianBlur(coverage, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
+    return torch.from_numpy(light / np.maximum(coverage, 1e-6))
 
 
 def project_texture(
@@ -447,16 +465,84 @@ def lay_out(
     )
 
 
-def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None) -> torch.Tensor:
-    """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its own
-    luminance over the bright end of those splats' (:func:`shading`); 1 for the other splats."""
+def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0) -> torch.Tensor:
+    """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its
+    luminance, averaged over its neighbours within about ``softness`` (a world length, 0: its own), over the
+    bright end of those splats' (:func:`shading`); 1 for the other splats."""
     luminance = scene.base_colors.detach() @ torch.tensor(LUMA, dtype=scene.dtype, device=scene.device)
-    if rows is None:
-        return shading(luminance)
     shade = torch.ones_like(luminance)
-    if bool(rows.any()):
-        shade[rows] = shading(luminance[rows])
+    part = slice(None) if rows is None else rows
+    if rows is not None and not bool(rows.any()):
+        return shade
+    seen = luminance[part]
+    if softness > 0:
+        seen = spatial_blur(scene.means.detach()[part], seen, scene.opacities.detach()[part], softness)
+    shade[part] = shading(seen)
     return shade
+
+
+def layout_shading(
+    scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig
+) -> torch.Tensor | None:
+    """The shade a run with ``config`` lays the texture with (:func:`layout_shade`, ``shade_softness``
+    repeats of ``frame``), or None when it keeps the texture's own colours (``keep_shading`` off)."""
+    if not config.keep_shading:
+        return None
+    return layout_shade(scene, rows, config.shade_softness * frame.repeat)
+
+
+SPATIAL_GRID = 128
+""":func:`spatial_blur`'s grid has at most this many cells along the scene's longest side ..."""
+SPATIAL_CELLS_PER_SIGMA = 2
+"""... and otherwise this many per sigma."""
+SPATIAL_BOUNDS_QUANTILE = 0.005
+"""The grid spans the points but this share of outliers on each side (they read the grid's border)."""
+
+
+def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
+    """(N,) ``values`` at ``points`` averaged over their neighbours with Gaussian weights of width ``sigma``
+    times ``weights``: a normalised convolution on a grid (each point splatted to and read from its eight
+    cells, trilinearly; the grid's cells no wider than sigma / 2 unless the grid would exceed
+    ``SPATIAL_GRID`` cells on a side, then as wide as that allows)."""
+    if not len(points) or sigma <= 0:
+        return values.clone()
+    p = points.detach().float()
+    lo = torch.quantile(p, SPATIAL_BOUNDS_QUANTILE, dim=0) if len(p) > 1 else p[0]
+    hi = torch.quantile(p, 1.0 - SPATIAL_BOUNDS_QUANTILE, dim=0) if len(p) > 1 else p[0]
+    cell = max(sigma / SPATIAL_CELLS_PER_SIGMA, float((hi - lo).max()) / (SPATIAL_GRID - 1), 1e-12)
+    dims = (torch.floor((hi - lo) / cell).long() + 2).tolist()
+    x = ((p - lo) / cell).clamp(min=torch.zeros(3), max=torch.tensor(dims, dtype=p.dtype) - 1.0 - 1e-4)
+    base = x.floor().long()
+    frac = x - base
+    w = weights.detach().float()
+    corners = []
+    for corner in range(8):
+        offset = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+        share = torch.where(offset.bool(), frac, 1.0 - frac).prod(dim=1)
+        index = base + offset
+        corners.append(((index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2], share))
+    grid = torch.zeros(2, dims[0] * dims[1] * dims[2])
+    for index, share in corners:
+        grid[0].index_add_(0, index, share * w)
+        grid[1].index_add_(0, index, share * w * values.detach().float())
+    grid = _gaussian_blur_3d(grid.view(2, *dims), sigma / cell).reshape(2, -1)
+    mass = sum(share * grid[0, index] for index, share in corners)
+    total = sum(share * grid[1, index] for index, share in corners)
+    return (total / mass.clamp_min(1e-12)).to(values)
+
+
+def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:
+    """(C, X, Y, Z) ``grid`` blurred by a Gaussian of ``sigma_cells`` along each axis (zero outside)."""
+    radius = max(1, math.ceil(3.0 * sigma_cells))
+    taps = torch.arange(-radius, radius + 1, dtype=grid.dtype)
+    kernel = torch.exp(-0.5 * (taps / sigma_cells) ** 2)
+    kernel = (kernel / kernel.sum()).view(1, 1, -1)
+    for axis in (1, 2, 3):
+        moved = grid.movedim(axis, -1)
+        shape = moved.shape
+        blurred = F.conv1d(moved.reshape(-1, 1, shape[-1]), kernel, padding=radius)
+        grid = blurred.view(shape).movedim(-1, axis)
+    return grid
 
 
 def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None) -> torch.Tensor:

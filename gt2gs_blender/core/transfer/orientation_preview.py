@@ -27,7 +27,7 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import LayoutFrame, add_detail, lay_out, layout_frame, layout_shade, shading, texture_height_for
+from .layout import LayoutFrame, add_detail, lay_out, layout_frame, layout_shading, shading, texture_height_for
 from .metrics import LUMA
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
@@ -108,7 +108,7 @@ def layout_preview(
     as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     views, frame = _run_frame(scene, cameras, config)
-    shade = layout_shade(scene) if config.keep_shading else None
+    shade = layout_shading(scene, None, frame, config)
     laid = lay_out(scene.detach(), None, views, image, frame, config, shade)
     if config.split_size > 0:
         laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config, shade)

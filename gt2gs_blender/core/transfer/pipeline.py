@@ -28,7 +28,7 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shade, texture_height_for
+from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shading, texture_height_for
 from .metrics import preview_ssim
 from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start
@@ -183,8 +183,12 @@ def _transfer(
     if hidden is not None:
         work = work.subset(~hidden)
     region = selected if selected is None or hidden is None else selected[~hidden]
+    frame = None
+    if config.layout or config.texture_repeats > 0:
+        # sized on every selected splat, hidden ones too, as the orientation preview sizes it
+        frame = layout_frame(original if selected is None else original.subset(selected), content, config)
     # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
-    shade = layout_shade(work, region) if config.layout and config.keep_shading else None
+    shade = layout_shading(work, region, frame, config) if config.layout else None
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -202,9 +206,7 @@ def _transfer(
     used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content
     n_work = len(work)
     laid_out = None
-    if config.layout or config.texture_repeats > 0:
-        # sized on every selected splat, hidden ones too, as the orientation preview sizes it
-        frame = layout_frame(original if selected is None else original.subset(selected), content, config)
+    if frame is not None:
         if config.texture_repeats > 0:
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
@@ -213,7 +215,8 @@ def _transfer(
             laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
     if config.layout and config.lambda_layout > 0:
-        ideal = layout_images(used, image, frame, config.angle, shaded=shade is not None)
+        softness = config.shade_softness * frame.repeat
+        ideal = layout_images(used, image, frame, config.angle, shade is not None, softness)
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 
