@@ -399,6 +399,23 @@ def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():
     assert torch.equal(spatial_blur(points, values, weights, 0.0), values)
 
 
+def test_spatial_blur_degenerate_inputs_stay_finite_and_in_range():
+    """One point, all points in one place, weights of zero, a far outlier: finite, within the values' range."""
+    from gt2gs_blender.core.transfer.layout import spatial_blur
+
+    one = spatial_blur(torch.zeros(1, 3), torch.tensor([0.7]), torch.ones(1), 0.1)
+    assert torch.allclose(one, torch.tensor([0.7]))
+    same = spatial_blur(torch.ones(50, 3), torch.linspace(0, 1, 50), torch.ones(50), 0.1)
+    assert torch.allclose(same, torch.full((50,), 0.5), atol=1e-5)  # one place: the plain mean
+    values = torch.rand(200, generator=torch.Generator().manual_seed(1))
+    points = torch.rand(200, 3, generator=torch.Generator().manual_seed(2))
+    points[0] = 1e4  # a floater far outside the grid reads its border
+    for weights in (torch.zeros(200), torch.ones(200)):
+        out = spatial_blur(points, values, weights, 0.05)
+        assert torch.isfinite(out).all()
+        assert float(out.min()) >= float(values.min()) - 1e-5 and float(out.max()) <= float(values.max()) + 1e-5
+
+
 def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovered_pixels():
     """The ideal per-view image of the layout has the bars' period on screen; the layout loss is 0 on
     it whatever lies off the surface, and grows with a change on the surface."""

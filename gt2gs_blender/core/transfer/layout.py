@@ -495,6 +495,8 @@ SPATIAL_GRID = 128
 """:func:`spatial_blur`'s grid has at most this many cells along the scene's longest side ..."""
 SPATIAL_CELLS_PER_SIGMA = 2
 """... and otherwise this many per sigma."""
+SPATIAL_MIN_WEIGHT = 1e-6
+"""Weights (opacities) below this count as this: among nearly transparent splats the average is a plain one."""
 SPATIAL_BOUNDS_QUANTILE = 0.005
 """The grid spans the points but this share of outliers on each side (they read the grid's border)."""
 
@@ -514,7 +516,7 @@ def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tens
     x = ((p - lo) / cell).clamp(min=torch.zeros(3), max=torch.tensor(dims, dtype=p.dtype) - 1.0 - 1e-4)
     base = x.floor().long()
     frac = x - base
-    w = weights.detach().float()
+    w = weights.detach().float().clamp_min(SPATIAL_MIN_WEIGHT)
     corners = []
     for corner in range(8):
         offset = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
