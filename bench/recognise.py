@@ -25,7 +25,8 @@ at the run's texture height (a ``projected-<height>`` row); ``preview_reference`
 
 Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its
 held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
-the texture (the structure measures reward the texture alone; this is the other side of the trade).
+the texture (the structure measures reward the texture alone; this is the other side of the trade). The
+original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with; ``--reuse`` measures them again instead of transferring when the settings match (and
@@ -141,7 +142,8 @@ def content_ssim(views: list[tuple[np.ndarray, np.ndarray]], original: list[tupl
     for (rgb, _), (reference, alpha) in zip(views, original, strict=True):
         a, b = (torch.from_numpy(measure.to_float(x)) @ luma for x in (rgb, reference))
         values.append(masked_ssim(a[..., None], b[..., None], torch.from_numpy(alpha > measure.MASK_ALPHA)))
-    return float(np.mean([v for v in values if v is not None]))
+    covered = [v for v in values if v is not None]
+    return float(np.mean(covered)) if covered else float("nan")
 
 
 def from_preview(views: list[measure.ViewStats], preview: list[measure.ViewStats]) -> dict[str, float]:
@@ -246,6 +248,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
         sheet[texture] = [tile(image, texture)]
         previews: dict[str, list[measure.ViewStats]] = {}
         r = row(name, texture, "original", original)
+        r["content_ssim"] = 1.0  # the original is the scene
         for height in heights:
             views = [
                 (
@@ -420,7 +423,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
             preview += f" vs {r['preview_reference']}"
         print(
             f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
-            f"{r.get('content_ssim', 1.0):>10.3f}   {preview}"
+            f"{r['content_ssim']:>10.3f}   {preview}"
         )
     print(
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
@@ -438,7 +441,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
             print(
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
-                f"scene SSIM {s.get('mean_content_ssim', 1.0):.3f}{preview}"
+                f"scene SSIM {s['mean_content_ssim']:.3f}{preview}"
             )
             if is_transfer(variant):
                 met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED

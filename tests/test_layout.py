@@ -343,6 +343,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     each half keeps its shade, on the seam the splats and the layout term's image take the shade of the mean
     luminance 0.5; the preview still shows exactly the zero-step run."""
     from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.layout import shade_width
     from gt2gs_blender.core.transfer.orientation_preview import layout_preview
 
     base, cam = wall(n=80), front_camera(96)
@@ -372,7 +373,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
     views = render_views(scene, [cam], torch.zeros(3), "auto")
     frame = layout_frame(scene, views, config)
-    (ideal,) = layout_images(views, white, frame, 0.0, True, config.shade_softness * frame.repeat)
+    (ideal,) = layout_images(views, white, frame, 0.0, True, shade_width(frame, config))
     column = cam.fx * (x / (result.scene.means[:, 2])) + cam.cx  # where each splat's x lands on screen
     middle = round(float(column[x.abs() < 0.01].mean()))
     row = ideal[48, :, 0]
@@ -397,6 +398,16 @@ def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():
     flat = spatial_blur(points, torch.full((3000,), 0.3), weights, 0.1)
     assert torch.allclose(flat, torch.full((3000,), 0.3), atol=1e-5)
     assert torch.equal(spatial_blur(points, values, weights, 0.0), values)
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_spatial_blur_takes_and_returns_cuda_tensors():
+    """A CUDA run's splats: the blur (on the CPU inside) returns on CUDA, equal to the CPU result."""
+    from gt2gs_blender.core.transfer.layout import spatial_blur
+
+    points, values = torch.rand(500, 3), torch.rand(500)
+    out = spatial_blur(points.cuda(), values.cuda(), torch.ones(500).cuda(), 0.1)
+    assert out.is_cuda and torch.allclose(out.cpu(), spatial_blur(points, values, torch.ones(500), 0.1))
 
 
 def test_spatial_blur_degenerate_inputs_stay_finite_and_in_range():

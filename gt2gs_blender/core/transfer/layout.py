@@ -36,7 +36,8 @@ every view agrees on.
   SSIM to the original fell from 0.49 to 0.05). The shade follows each splat through densification
   (an optimiser attachment) to the detail split's children. ``shade_softness`` first averages the
   luminance over neighbours within that share of a repeat (``spatial_blur``; the layout term's images
-  blur theirs to match), so only the scene's broad light and dark darkens the texture, not its specks.
+  average their surface points the same way), so only the scene's broad light and dark darkens the
+  texture, not its specks.
 """
 
 from __future__ import annotations
@@ -329,8 +330,8 @@ def layout_images(
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
-    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance, blurred over about
-    ``softness``, a world length, at the view's median depth), as the layout lays it."""
+    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance, averaged over the
+    surface points within about ``softness``, a world length, by :func:`spatial_blur`), as the layout lays it."""
     images = []
     for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -340,22 +341,14 @@ def layout_images(
         pixel = float(z[covered].median()) / camera.fy if bool(covered.any()) else 0.0
         colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
         if shaded:
-            seen = _view_luminance(premultiplied.cpu(), alpha.cpu(), softness / pixel if pixel > 0 else 0.0)
-            colours = colours * shading(seen[covered])[:, None].to(colours)
+            weight = alpha.cpu()[covered].float()
+            seen = (premultiplied.cpu()[covered].float() @ torch.tensor(LUMA)) / weight
+            seen = spatial_blur(points, seen, weight, softness)  # the same average as the splats' shade
+            colours = colours * shading(seen)[:, None].to(colours)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))
     return images
-
-
-def _view_luminance(premultiplied: torch.Tensor, alpha: torch.Tensor, sigma_px: float) -> torch.Tensor:
-    """(H, W) luminance of what a view sees (un-premultiplied), blurred over ``sigma_px`` where it is covered."""
-    coverage = alpha.float().numpy()
-    light = (premultiplied.float() @ torch.tensor(LUMA)).numpy()  # luminance x coverage
-    if sigma_px > 0:
-        light = cv2.GaussianBlur(light, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
-        coverage = cv2.GaussianBlur(coverage, (0, 0), sigma_px, borderType=cv2.BORDER_REFLECT)
-    return torch.from_numpy(light / np.maximum(coverage, 1e-6))
 
 
 def project_texture(
@@ -488,7 +481,12 @@ def layout_shading(
     repeats of ``frame``), or None when it keeps the texture's own colours (``keep_shading`` off)."""
     if not config.keep_shading:
         return None
-    return layout_shade(scene, rows, config.shade_softness * frame.repeat)
+    return layout_shade(scene, rows, shade_width(frame, config))
+
+
+def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:
+    """The world width the kept light and shade is averaged over: ``shade_softness`` repeats of ``frame``."""
+    return config.shade_softness * frame.repeat
 
 
 SPATIAL_GRID = 128
@@ -498,25 +496,34 @@ SPATIAL_CELLS_PER_SIGMA = 2
 SPATIAL_MIN_WEIGHT = 1e-6
 """Weights (opacities) below this count as this: among nearly transparent splats the average is a plain one."""
 SPATIAL_BOUNDS_QUANTILE = 0.005
-"""The grid spans the points but this share of outliers on each side (they read the grid's border)."""
+SPATIAL_BOUNDS_MARGIN = 3.0
+"""The grid spans the points but this share of them on each side, widened by this many sigmas: points
+beyond (floaters) read the grid's border."""
+SPATIAL_BOUNDS_SAMPLE = 1_000_000
+"""The bounds' quantiles come from at most about this many of the points (torch.quantile's size limit)."""
 
 
 def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
     """(N,) ``values`` at ``points`` averaged over their neighbours with Gaussian weights of width ``sigma``
     times ``weights``: a normalised convolution on a grid (each point splatted to and read from its eight
-    cells, trilinearly; the grid's cells no wider than sigma / 2 unless the grid would exceed
-    ``SPATIAL_GRID`` cells on a side, then as wide as that allows)."""
+    cells, trilinearly; cells no wider than sigma / 2 unless the grid would exceed ``SPATIAL_GRID`` cells on
+    a side). Outliers beyond the grid read its border but add nothing to it; a point with no weight near it
+    keeps its value. Runs on the CPU (a small grid), returns on ``values``' device."""
     if not len(points) or sigma <= 0:
         return values.clone()
-    p = points.detach().float()
-    lo = torch.quantile(p, SPATIAL_BOUNDS_QUANTILE, dim=0) if len(p) > 1 else p[0]
-    hi = torch.quantile(p, 1.0 - SPATIAL_BOUNDS_QUANTILE, dim=0) if len(p) > 1 else p[0]
-    cell = max(sigma / SPATIAL_CELLS_PER_SIGMA, float((hi - lo).max()) / (SPATIAL_GRID - 1), 1e-12)
+    p = points.detach().float().cpu()
+    v = values.detach().float().cpu()
+    sample = p[:: max(1, len(p) // SPATIAL_BOUNDS_SAMPLE)]
+    margin = SPATIAL_BOUNDS_MARGIN * sigma
+    lo = torch.quantile(sample, SPATIAL_BOUNDS_QUANTILE, dim=0) - margin
+    hi = torch.quantile(sample, 1.0 - SPATIAL_BOUNDS_QUANTILE, dim=0) + margin
+    inside = ((p >= lo) & (p <= hi)).all(dim=1)
+    cell = max(sigma / SPATIAL_CELLS_PER_SIGMA, float((hi - lo).max()) / (SPATIAL_GRID - 2), 1e-12)
     dims = (torch.floor((hi - lo) / cell).long() + 2).tolist()
     x = ((p - lo) / cell).clamp(min=torch.zeros(3), max=torch.tensor(dims, dtype=p.dtype) - 1.0 - 1e-4)
     base = x.floor().long()
     frac = x - base
-    w = weights.detach().float().clamp_min(SPATIAL_MIN_WEIGHT)
+    w = torch.where(inside, weights.detach().float().cpu().clamp_min(SPATIAL_MIN_WEIGHT), 0.0)
     corners = []
     for corner in range(8):
         offset = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
@@ -526,11 +533,12 @@ def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tens
     grid = torch.zeros(2, dims[0] * dims[1] * dims[2])
     for index, share in corners:
         grid[0].index_add_(0, index, share * w)
-        grid[1].index_add_(0, index, share * w * values.detach().float())
+        grid[1].index_add_(0, index, share * w * v)
     grid = _gaussian_blur_3d(grid.view(2, *dims), sigma / cell).reshape(2, -1)
     mass = sum(share * grid[0, index] for index, share in corners)
     total = sum(share * grid[1, index] for index, share in corners)
-    return (total / mass.clamp_min(1e-12)).to(values)
+    blurred = torch.where(mass > 1e-12, total / mass.clamp_min(1e-12), v)
+    return blurred.to(values)
 
 
 def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:

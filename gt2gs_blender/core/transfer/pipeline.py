@@ -28,7 +28,7 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shading, texture_height_for
+from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shading, shade_width, texture_height_for
 from .metrics import preview_ssim
 from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start
@@ -188,7 +188,7 @@ def _transfer(
         # sized on every selected splat, hidden ones too, as the orientation preview sizes it
         frame = layout_frame(original if selected is None else original.subset(selected), content, config)
     # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
-    shade = layout_shading(work, region, frame, config) if config.layout else None
+    shade = layout_shading(work, region, frame, config) if frame is not None and config.layout else None
     if config.color_transfer:
         work = apply_color_transfer(work, content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -214,9 +214,8 @@ def _transfer(
             projection = "box" if frame.projector is None else "view"
             laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
     targets = view_targets(used, work, extractor, config, config.backend)
-    if config.layout and config.lambda_layout > 0:
-        softness = config.shade_softness * frame.repeat
-        ideal = layout_images(used, image, frame, config.angle, shade is not None, softness)
+    if frame is not None and config.layout and config.lambda_layout > 0:
+        ideal = layout_images(used, image, frame, config.angle, shade is not None, shade_width(frame, config))
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 
