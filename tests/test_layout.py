@@ -294,6 +294,28 @@ def test_the_sketch_preview_takes_the_texture_size_the_run_derives(shared, tmp_p
     assert height < 128 and len(grey) / int(np.argmax(spectrum)) == pytest.approx(height / 0.5 / 4, rel=0.2)
 
 
+def half_dark_wall() -> tuple[GaussianScene, Camera, np.ndarray]:
+    """The wall at luminance 0.2 on its left half and 0.8 on its right, its front camera, a white texture."""
+    base, cam = wall(n=80), front_camera(96)
+    left = base.means[:, 0] < 0
+    grey = torch.where(left[:, None], torch.full((len(base), 3), 0.2), torch.full((len(base), 3), 0.8))
+    return with_colours(base, grey), cam, np.ones((64, 64, 3), np.float32)
+
+
+def zero_step_config(shared, tmp_path, **overrides) -> TransferConfig:
+    """The wall's laid-out run with no optimisation and no colour transfer: what it lays is what comes out."""
+    return wall_config(
+        shared,
+        tmp_path,
+        stylise_steps=0,
+        correct_steps=0,
+        color_transfer=False,
+        skip_hidden=False,
+        background=(0, 0, 0),
+        **overrides,
+    )
+
+
 @pytest.mark.parametrize("keep", [True, False])
 def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8), Shade
@@ -303,22 +325,8 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.transfer.orientation_preview import layout_preview
 
-    base, cam = wall(n=80), front_camera(96)
-    left = base.means[:, 0] < 0
-    grey = torch.where(left[:, None], torch.full((len(base), 3), 0.2), torch.full((len(base), 3), 0.8))
-    scene = with_colours(base, grey)
-    white = np.ones((64, 64, 3), np.float32)
-    config = wall_config(
-        shared,
-        tmp_path,
-        stylise_steps=0,
-        correct_steps=0,
-        color_transfer=False,
-        keep_shading=keep,
-        shade_softness=0.0,
-        skip_hidden=False,
-        background=(0, 0, 0),
-    )
+    scene, cam, white = half_dark_wall()
+    config = zero_step_config(shared, tmp_path, keep_shading=keep, shade_softness=0.0)
     result = transfer(scene, white, [cam], config)
     colours = result.scene.base_colors.mean(1)
     on_left = result.scene.means[:, 0] < -0.1
@@ -346,21 +354,8 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     from gt2gs_blender.core.transfer.layout import shade_width
     from gt2gs_blender.core.transfer.orientation_preview import layout_preview
 
-    base, cam = wall(n=80), front_camera(96)
-    left = base.means[:, 0] < 0
-    grey = torch.where(left[:, None], torch.full((len(base), 3), 0.2), torch.full((len(base), 3), 0.8))
-    scene = with_colours(base, grey)
-    white = np.ones((64, 64, 3), np.float32)
-    config = wall_config(
-        shared,
-        tmp_path,
-        stylise_steps=0,
-        correct_steps=0,
-        color_transfer=False,
-        shade_softness=0.1,
-        skip_hidden=False,
-        background=(0, 0, 0),
-    )
+    scene, cam, white = half_dark_wall()
+    config = zero_step_config(shared, tmp_path, shade_softness=0.1)
     result = transfer(scene, white, [cam], config)
     colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
     dark, seam = 0.35 + 0.65 * 0.2 / 0.8, 0.35 + 0.65 * 0.5 / 0.8
