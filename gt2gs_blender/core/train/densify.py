@@ -186,7 +186,8 @@ def _split_children(
     """Children of the parents ``ids`` (each listed ``count`` times): positions sampled from the
     parent Gaussian, scales divided by 0.8 * count (3DGS's 1.6 for two children)."""
     scales = log_scales[ids].exp()
-    noise = torch.randn(scales.shape, generator=generator, dtype=scales.dtype, device=scales.device)
+    drawn_on = scales.device if generator is None else generator.device  # a generator draws on its own device
+    noise = torch.randn(scales.shape, generator=generator, dtype=scales.dtype, device=drawn_on).to(scales.device)
     offsets = (quats_to_rotmats(quats[ids]) @ (noise * scales)[..., None])[..., 0]
     return means[ids] + offsets, log_scales[ids] - math.log(0.8 * count)
 

@@ -147,7 +147,7 @@ def redundant_views(
         for k in kept:
             kcam, kz, kalpha = small[k]
             warp = warp_image(
-                torch.zeros(*kz.shape, 1, dtype=kz.dtype),
+                torch.zeros(*kz.shape, 1, dtype=kz.dtype, device=kz.device),
                 kz,
                 kcam,
                 cam,

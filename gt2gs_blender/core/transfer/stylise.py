@@ -227,7 +227,7 @@ class Styliser:
     def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
         cfg = self.config
-        prior = self._prior(v, view) if cfg.gt2 else torch.full(view.mask.shape, math.nan)
+        prior = self._prior(v, view) if cfg.gt2 else self._unknown_angles(view)
         # NNFM's bank is one unlabelled feature map: every cell matches all of it, whatever its depth group
         match = match_with_prior(
             feats.detach(),
@@ -256,12 +256,17 @@ class Styliser:
     def _prior(self, v: int, view: ViewTargets) -> torch.Tensor:
         """Prior angle per cell: the start angle in the first view, else carried from the view before."""
         if view.link is None:
-            angle = torch.full(view.mask.shape, float(self.config.angle) % 360.0)
+            angle = torch.full(view.mask.shape, float(self.config.angle) % 360.0, device=view.mask.device)
             return torch.where(view.mask, angle, torch.full_like(angle, math.nan))
         previous = self.order[self.order.index(v) - 1]
         if previous not in self.angle_maps:
-            return torch.full(view.mask.shape, math.nan)
+            return self._unknown_angles(view)
         return view.link.prior_angles(self.angle_maps[previous])
+
+    @staticmethod
+    def _unknown_angles(view: ViewTargets) -> torch.Tensor:
+        """No prior angle anywhere in ``view`` (NaN per cell, on the view's device)."""
+        return torch.full(view.mask.shape, math.nan, device=view.mask.device)
 
     # -- correct (Geometry Preservation Branch) ---------------------------------------------------
     def correct_step(self) -> float:
