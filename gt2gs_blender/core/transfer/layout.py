@@ -219,8 +219,9 @@ def split_coarse(scene: GaussianScene, max_sigma: float, max_count: int) -> tupl
         room = (max_count - len(scene)) // 3
         if room <= 0 or not bool(coarse.any()):
             break
-        if int(coarse.sum()) > room:  # the largest first, exactly ``room`` of them whatever the ties
-            coarse = torch.zeros_like(coarse).index_fill_(0, torch.topk(largest, room).indices, True)
+        if int(coarse.sum()) > room:  # the largest first, exactly ``room``; ties by row, the same on every device
+            largest_first = torch.sort(largest, descending=True, stable=True).indices[:room]
+            coarse = torch.zeros_like(coarse).index_fill_(0, largest_first, True)
         children, parents = _split_2x2(scene.subset(coarse)), coarse.nonzero().squeeze(1)
         scene = concat([scene.subset(~coarse), children])
         source = torch.cat([source[~coarse], source[parents].repeat(4)])
@@ -231,7 +232,7 @@ def _split_2x2(parents: GaussianScene) -> GaussianScene:
     """Four children per parent, in the plane of its two largest axes (module notes)."""
     scales = parents.scales.detach()
     rot = quats_to_rotmats(parents.rotations.detach())
-    order = scales.argsort(dim=1, descending=True)
+    order = scales.argsort(dim=1, descending=True, stable=True)  # equal axes: by index, on every device
     rows = torch.arange(len(parents), device=parents.device)
     first = rot[rows, :, order[:, 0]] * scales[rows, order[:, 0]][:, None]
     second = rot[rows, :, order[:, 1]] * scales[rows, order[:, 1]][:, None]
@@ -295,6 +296,12 @@ def _normal_map(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor) -> tup
     return normal, facing.abs(), valid
 
 
+EXACT_NEAREST = dict(algorithm=4, leaf_max_size=10)
+"""FLANN's single k-d tree: exact and deterministic nearest neighbours (the randomised forest gave a
+run-to-run different neighbour for ~10 % of queries, so the same scene laid out differently), and faster
+(0.2 s against 2.5 s for 100k queries in 400k points, 2 cores)."""
+
+
 def _fill_unseen(means: torch.Tensor, normals: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
     """Normals of splats no view sees, from their nearest seen splat (the view's up when none is seen)."""
     if bool(seen.all()):
@@ -302,8 +309,8 @@ def _fill_unseen(means: torch.Tensor, normals: torch.Tensor, seen: torch.Tensor)
     if not bool(seen.any()):
         return torch.tensor([0.0, 0.0, 1.0], dtype=normals.dtype).expand_as(normals).clone()
     points = means.float().numpy()
-    index = cv2.flann_Index(np.ascontiguousarray(points[seen.numpy()]), dict(algorithm=1, trees=4))
-    nearest, _ = index.knnSearch(np.ascontiguousarray(points[~seen.numpy()]), 1, params=dict(checks=32))
+    index = cv2.flann_Index(np.ascontiguousarray(points[seen.numpy()]), EXACT_NEAREST)
+    nearest, _ = index.knnSearch(np.ascontiguousarray(points[~seen.numpy()]), 1)
     filled = normals.clone()
     filled[~seen] = normals[seen][torch.from_numpy(nearest[:, 0].astype(np.int64))]
     return filled
