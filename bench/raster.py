@@ -1,8 +1,9 @@
 """Rasterizer benchmark: every available backend over scene sizes and resolutions, time beside error.
 
-Each configuration runs in its own subprocess so its peak memory (RSS growth over the inputs) is its
-own. Prints a table and writes a JSON list of records
-{backend, n, width, height, fwd_ms, fwd_bwd_ms, peak_mib, max_abs_err} (null where not measured).
+Each configuration runs in its own subprocess so its peak memory (RSS growth over the inputs on the
+CPU, torch's peak allocation on CUDA) is its own. With CUDA present the CUDA backends run on the GPU
+and the CPU backends on the CPU, in one table. Prints a table and writes a JSON list of records
+{backend, device, n, width, height, fwd_ms, fwd_bwd_ms, peak_mib, max_abs_err} (null where not measured).
 Error is the max |colour| difference to the float64 dense reference (tests/reference.py) over
 pixels where no alpha rule sits on its threshold; it is measured where the reference fits.
 
@@ -53,40 +54,63 @@ def rss_mib() -> float:
         return int(f.read().split()[1]) * resource.getpagesize() / 2**20
 
 
-def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
+def clock(device: str) -> float:
+    """perf_counter after the device's queued work is done (CUDA runs asynchronously)."""
+    import torch
+
+    if device == "cuda":
+        torch.cuda.synchronize()
+    return time.perf_counter()
+
+
+def run_one(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
     """Measure one configuration in this process (called in a subprocess)."""
+    import torch
 
     from gt2gs_blender.core.render import rasterization
 
     params, viewmats, ks = make_scene(n, res)
-    params = [p.requires_grad_(True) for p in params]
+    params = [p.to(device).requires_grad_(True) for p in params]
+    viewmats, ks = viewmats.to(device), ks.to(device)
     warm = rasterization(*params, viewmats, ks, res, res, sh_degree=3, backend=backend)
     assert warm.backend == backend, f"{backend} fell back to {warm.backend}"
     del warm
     base = rss_mib()
+    if device == "cuda":
+        torch.cuda.reset_peak_memory_stats()
+        base = torch.cuda.memory_allocated() / 2**20
     fwd, total = [], []
     for _ in range(repeats):
         for p in params:
             p.grad = None
-        t0 = time.perf_counter()
+        t0 = clock(device)
         out = rasterization(*params, viewmats, ks, res, res, sh_degree=3, backend=backend)
-        t1 = time.perf_counter()
+        t1 = clock(device)
         (out.colors.sum() + out.depths.sum() * 0.1 + out.alphas.sum()).backward()
-        t2 = time.perf_counter()
+        t2 = clock(device)
         fwd.append(t1 - t0)
         total.append(t2 - t0)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - base
+    if device == "cuda":
+        peak = torch.cuda.max_memory_allocated() / 2**20 - base
+    else:
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024 - base
     err = None
     if n * res * res <= REFERENCE_MAX_WORK:
         from tests.reference import render_reference
 
         ref = render_reference(
-            *(p.detach().numpy() for p in params), viewmats[0].numpy(), ks[0].numpy(), res, res, sh_degree=3
+            *(p.detach().cpu().numpy() for p in params),
+            viewmats[0].cpu().numpy(),
+            ks[0].cpu().numpy(),
+            res,
+            res,
+            sh_degree=3,
         )
-        diff = (out.colors[0].detach().double().numpy() - ref.color)[~ref.ambiguous]
+        diff = (out.colors[0].detach().double().cpu().numpy() - ref.color)[~ref.ambiguous]
         err = float(abs(diff).max())
     return {
         "backend": backend,
+        "device": device,
         "n": n,
         "width": res,
         "height": res,
@@ -97,14 +121,15 @@ def run_one(backend: str, n: int, res: int, repeats: int) -> dict:
     }
 
 
-def measure(backend: str, n: int, res: int, repeats: int) -> dict:
+def measure(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
     """Run one configuration in a fresh subprocess and parse its JSON line."""
-    cmd = [sys.executable, __file__, "--one", backend, str(n), str(res), "--repeats", str(repeats)]
+    cmd = [sys.executable, __file__, "--one", backend, device, str(n), str(res), "--repeats", str(repeats)]
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
-        print(f"  {backend} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
+        print(f"  {backend}/{device} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
         return {
             "backend": backend,
+            "device": device,
             "n": n,
             "width": res,
             "height": res,
@@ -114,6 +139,16 @@ def measure(backend: str, n: int, res: int, repeats: int) -> dict:
             "max_abs_err": None,
         }
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def backend_devices() -> list[tuple[str, str]]:
+    """(backend, device) pairs to measure: the CUDA backends on the GPU when present, then the CPU's."""
+    import torch
+
+    from gt2gs_blender.core.render import available_backends
+
+    devices = (["cuda"] if torch.cuda.is_available() else []) + ["cpu"]
+    return [(b, d) for d in devices for b in available_backends(d)]
 
 
 def fmt(v, spec: str) -> str:
@@ -126,29 +161,26 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "raster.json")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--backends", default=None, help="comma-separated subset of the available backends")
-    parser.add_argument("--one", nargs=3, metavar=("BACKEND", "N", "RES"), help=argparse.SUPPRESS)
+    parser.add_argument("--one", nargs=4, metavar=("BACKEND", "DEVICE", "N", "RES"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
-        print(json.dumps(run_one(args.one[0], int(args.one[1]), int(args.one[2]), args.repeats)))
+        backend, device, n, res = args.one
+        print(json.dumps(run_one(backend, device, int(n), int(res), args.repeats)))
         return 0
 
-    import torch
-
-    from gt2gs_blender.core.render import available_backends
-
-    backends = available_backends("cuda" if torch.cuda.is_available() else "cpu")
-    if torch.cuda.is_available():
-        backends += [b for b in available_backends("cpu") if b not in backends]
+    runs = backend_devices()
     if args.backends:
-        backends = [b for b in args.backends.split(",") if b in backends]
+        runs = [(b, d) for b, d in runs if b in args.backends.split(",")]
     configs = QUICK if args.quick else [(n, r) for n in FULL_N for r in FULL_RES]
     records, too_slow = [], {}
-    print(f"{'backend':8} {'N':>9} {'res':>6} {'fwd ms':>9} {'fwd+bwd ms':>11} {'peak MiB':>9} {'max err':>9}")
+    print(f"{'backend':13} {'N':>9} {'res':>6} {'fwd ms':>9} {'fwd+bwd ms':>11} {'peak MiB':>9} {'max err':>9}")
     for n, res in configs:
-        for backend in backends:
-            if too_slow.get(backend, float("inf")) <= n * res * res:
+        for backend, device in runs:
+            key = f"{backend}/{device}"
+            if too_slow.get(key, float("inf")) <= n * res * res:
                 rec = {
                     "backend": backend,
+                    "device": device,
                     "n": n,
                     "width": res,
                     "height": res,
@@ -158,12 +190,12 @@ def main(argv: list[str] | None = None) -> int:
                     "max_abs_err": None,
                 }
             else:
-                rec = measure(backend, n, res, args.repeats)
+                rec = measure(backend, device, n, res, args.repeats)
                 if rec["fwd_bwd_ms"] is None or rec["fwd_bwd_ms"] > 1000 * SLOW_BACKEND_LIMIT_S:
-                    too_slow[backend] = min(too_slow.get(backend, float("inf")), n * res * res + 1)
+                    too_slow[key] = min(too_slow.get(key, float("inf")), n * res * res + 1)
             records.append(rec)
             print(
-                f"{backend:8} {n:>9,} {res:>4}² {fmt(rec['fwd_ms'], '9.1f')} {fmt(rec['fwd_bwd_ms'], '11.1f')} "
+                f"{key:13} {n:>9,} {res:>4}² {fmt(rec['fwd_ms'], '9.1f')} {fmt(rec['fwd_bwd_ms'], '11.1f')} "
                 f"{fmt(rec['peak_mib'], '9.0f')} {fmt(rec['max_abs_err'], '9.1e')}",
                 flush=True,
             )
