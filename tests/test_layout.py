@@ -447,13 +447,17 @@ def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovere
     assert float(layout_loss(torch.full((96, 96, 3), 0.5), black)) == pytest.approx(0.5, rel=1e-6)
 
 
-def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared, tmp_path):
-    """Only the region is laid out and split; the Gaussians outside it come out first, unchanged."""
+@pytest.mark.parametrize("split_first", [True, False])
+def test_a_region_transfer_with_the_layout_leaves_the_rest_bit_identical(shared, tmp_path, split_first):
+    """Only the region is laid out and split (before or after refining); the Gaussians outside it come out
+    first, unchanged."""
     from gt2gs_blender.core.api import transfer
 
     scene, cam = wall(n=60), front_camera(96)
     region = scene.means[:, 0] < 0
-    config = wall_config(shared, tmp_path, stylise_steps=4, correct_steps=2, n_angles=4, split_size=0.01)
+    config = wall_config(
+        shared, tmp_path, stylise_steps=4, correct_steps=2, n_angles=4, split_size=0.01, split_first=split_first
+    )
     result = transfer(scene, stripes(), [cam], config, region=region)
     outside = int((~region).sum())
     for name, value in scene.subset(~region).tensors().items():
@@ -475,3 +479,17 @@ def test_each_point_reads_the_texture_blurred_to_its_own_footprint():
     fine, coarse = project_texture(points, normals, texture, frame, 0.0, torch.tensor([1e-4, 0.5])).mean(-1)
     assert float(fine) > 0.95 or float(fine) < 0.05
     assert abs(float(coarse) - 0.5) < 0.05
+
+
+def test_splitting_first_lays_out_the_same_start(shared, tmp_path):
+    """Split Before Refining changes when the coarse splats split, not what is laid: with no steps the run
+    equals the one that splits at the end, splat for splat, shade included."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam, _ = half_dark_wall()
+    texture = stripes(period=16, size=64)
+    at_end = transfer(scene, texture, [cam], zero_step_config(shared, tmp_path, split_first=False)).scene
+    first = transfer(scene, texture, [cam], zero_step_config(shared, tmp_path, split_first=True)).scene
+    assert len(first) == len(at_end) > 2 * len(scene)
+    assert torch.equal(first.means, at_end.means)
+    assert torch.allclose(first.sh_dc, at_end.sh_dc, atol=1e-5)

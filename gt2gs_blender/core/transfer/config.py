@@ -143,11 +143,18 @@ class TransferConfig:
     split_size: float = setting(
         0.015,
         "Split Splats Above",
-        "With Lay Out Texture on, splats larger than this share of one texture repeat are split at the "
-        "end (up to 12 times as many splats), so the texture's lines can run between them; 0: never split",
+        "With Lay Out Texture on, splats larger than this share of one texture repeat are split (up to "
+        "12 times as many splats), so the texture's lines can run between them; 0: never split",
         "texture",
         min=0.0,
         max=1.0,
+    )
+    split_first: bool = setting(
+        True,
+        "Split Before Refining",
+        "Split the coarse splats before the texture loss refines them, so it draws the texture's lines on "
+        "the fine splats (sharper planks, bricks and cells; about twice the time); off: split at the end",
+        "texture",
     )
     lambda_layout: float = setting(
         1.0,

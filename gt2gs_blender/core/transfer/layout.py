@@ -573,6 +573,25 @@ def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None) -> t
     return SHADE_FLOOR + (1.0 - SHADE_FLOOR) * (luminance / bright).clamp(0.0, 1.0)
 
 
+def split_for_detail(
+    scene: GaussianScene,
+    rows: torch.Tensor | None,
+    shade: torch.Tensor | None,
+    frame: LayoutFrame,
+    config: TransferConfig,
+) -> tuple[GaussianScene, torch.Tensor | None, torch.Tensor | None]:
+    """``scene`` with ``rows`` (all when None) split where coarser than ``split_size`` repeats, before the
+    optimisation: the split rows move to the end; returns the scene, the new rows mask and ``shade`` per row."""
+    part = scene if rows is None else scene.subset(rows)
+    fine, source = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
+    if rows is None:
+        return fine, None, None if shade is None else shade[source]
+    kept = scene.subset(~rows)
+    mask = torch.cat([torch.zeros(len(kept), dtype=torch.bool), torch.ones(len(fine), dtype=torch.bool)])
+    shade = None if shade is None else torch.cat([shade[~rows], shade[rows][source]])
+    return concat([kept, fine]), mask.to(scene.device), shade
+
+
 def add_detail(
     scene: GaussianScene,
     start_colours: torch.Tensor,

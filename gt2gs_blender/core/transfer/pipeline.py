@@ -28,7 +28,16 @@ from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
 from .gt2 import view_order
-from .layout import add_detail, lay_out, layout_frame, layout_images, layout_shading, shade_width, texture_height_for
+from .layout import (
+    add_detail,
+    lay_out,
+    layout_frame,
+    layout_images,
+    layout_shading,
+    shade_width,
+    split_for_detail,
+    texture_height_for,
+)
 from .metrics import preview_ssim
 from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start
@@ -210,9 +219,12 @@ def _transfer(
         if config.texture_repeats > 0:
             config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
         if config.layout:
+            if config.split_first and config.split_size > 0:
+                work, region, shade = split_for_detail(work, region, shade, frame, config)
             work = lay_out(work, region, content, image, frame, config, shade)
             projection = "box" if frame.projector is None else "view"
-            laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": 0}
+            split = len(work) - n_work
+            laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": split}
     targets = view_targets(used, work, extractor, config, config.backend)
     if frame is not None and config.layout and config.lambda_layout > 0:
         ideal = layout_images(used, image, frame, config.angle, shade is not None, shade_width(frame, config))
@@ -237,7 +249,7 @@ def _transfer(
 
     tracker.begin("finish")
     restyled = None if frozen is None else ~frozen
-    if config.layout and config.split_size > 0:
+    if config.layout and config.split_size > 0 and not config.split_first:
         n_optimised = len(work)
         start_colours, shade = attached[COLOR_ATTACHMENT], attached.get(SHADE_ATTACHMENT)
         work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config, shade)

@@ -50,6 +50,7 @@ PRESETS: dict[str, TransferConfig] = {
         texture_height=128,
         evaluate=False,
         preview_every=5,
+        split_first=False,  # a first look: refine the coarse splats, split at the end
         **LAYOUT,
     ),
     "fast": TransferConfig(stylise_steps=300, correct_steps=150, n_angles=72, **LAYOUT),
