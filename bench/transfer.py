@@ -40,18 +40,18 @@ METRICS = ("texture_match", "texture_match_start", "ssim", "st_rmse", "lt_rmse",
 PROFILE_PARTS: dict[str, tuple[tuple[str, str], ...]] = {
     "stylise phases": (("stylise.py", "stylise_step"),),
     "  render fwd (stylise)": (),
-    "  VGG fwd": (("features.py", "forward"),),
+    "  VGG fwd": (("extractor.py", "forward"),),
     "  matching (GT2 targets)": (("gt2.py", "match_with_prior"),),
     "  backward, all": (("_tensor.py", "backward"),),
     "    rasterizer backward": (("cpu_backend.py", "backward"), ("torch_backend.py", "backward")),
     "  optimiser step": (("optim.py", "step"),),
     "correct phases (GPB)": (("stylise.py", "correct_step"),),
     "densification": (("densify.py", "densify_and_prune"),),
-    "render fwd, all": (("rasterizer/__init__.py", "render"),),
-    "content renders + targets": (("transfer.py", "view_targets"),),
+    "render fwd, all": (("render/__init__.py", "render"),),
+    "content renders + targets": (("views.py", "view_targets"),),
     "prior links": (("stylise.py", "order_and_link"),),
-    "bank build": (("transfer.py", "build_bank"),),
-    "metrics (finish)": (("transfer.py", "_evaluate"),),
+    "bank build": (("bank.py", "build_bank"),),
+    "metrics (finish)": (("pipeline.py", "_evaluate"),),
 }
 """Profile rows: the summed cumulative time of the listed (file suffix, function) pairs; a call
 nested in another listed one of the same row is not counted twice (cProfile's cumulative time)."""
@@ -98,7 +98,7 @@ def profile_rows(stats: pstats.Stats) -> dict[str, float]:
 def _render_in(stats: pstats.Stats, caller: str) -> float:
     """Cumulative seconds of the rasterizer's ``render`` when called from ``caller``."""
     for (filename, _, name), (_, _, _, _, callers) in stats.stats.items():  # type: ignore[attr-defined]
-        if filename.replace(os.sep, "/").endswith("rasterizer/__init__.py") and name == "render":
+        if filename.replace(os.sep, "/").endswith("render/__init__.py") and name == "render":
             return sum(v[3] for (_, _, fn), v in callers.items() if fn == caller)
     return 0.0
 
