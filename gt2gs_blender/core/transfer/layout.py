@@ -584,12 +584,21 @@ def split_for_detail(
     optimisation: the split rows move to the end; returns the scene, the new rows mask and ``shade`` per row."""
     part = scene if rows is None else scene.subset(rows)
     fine, source = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
+    if shade is not None:
+        shade = shade[source] if rows is None else torch.cat([shade[~rows], shade[rows][source]])
+    return *_rejoin(scene, rows, fine), shade
+
+
+def _rejoin(
+    scene: GaussianScene, rows: torch.Tensor | None, fine: GaussianScene
+) -> tuple[GaussianScene, torch.Tensor | None]:
+    """``scene``'s splats outside ``rows`` (in order) then ``fine``, the split ``rows`` (all of it when None),
+    and the new rows mask (None when all)."""
     if rows is None:
-        return fine, None, None if shade is None else shade[source]
+        return fine, None
     kept = scene.subset(~rows)
     mask = torch.cat([torch.zeros(len(kept), dtype=torch.bool), torch.ones(len(fine), dtype=torch.bool)])
-    shade = None if shade is None else torch.cat([shade[~rows], shade[rows][source]])
-    return concat([kept, fine]), mask.to(scene.device), shade
+    return concat([kept, fine]), mask.to(scene.device)
 
 
 def add_detail(
@@ -614,8 +623,4 @@ def add_detail(
         colours = colours * (shade if rows is None else shade[rows])[source, None].to(colours)
     colours = colours + change[source]
     fine = replace(fine, sh_dc=((colours.clamp(0.0, 1.0) - 0.5) / SH_C0).to(fine.sh_dc))
-    if rows is None:
-        return fine, None
-    kept = scene.subset(~rows)
-    mask = torch.cat([torch.zeros(len(kept), dtype=torch.bool), torch.ones(len(fine), dtype=torch.bool)])
-    return concat([kept, fine]), mask.to(scene.device)
+    return _rejoin(scene, rows, fine)
