@@ -10,7 +10,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from gt2gs_blender.core.render.projection import Projection
+from gt2gs_blender.core.render.projection import Footprints
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.train.densify import (
     DensifyConfig,
@@ -186,28 +186,22 @@ def test_prune_large_by_screen_and_world_size():
         assert len(opt.scene) == expected
 
 
-def fake_projection(gauss_ids: list[int], means2d_grad: list[list[float]], radii: list[float]) -> Projection:
+def footprints(gauss_ids: list[int], means2d_grad: list[list[float]], radii: list[float]) -> Footprints:
     m = len(gauss_ids)
     means2d = torch.zeros(m, 2, requires_grad=True)
     means2d.grad = torch.tensor(means2d_grad)
-    empty = torch.zeros(m, 3)
-    return Projection(
+    return Footprints(
         cam_ids=torch.zeros(m, dtype=torch.long),
         gauss_ids=torch.tensor(gauss_ids),
         means2d=means2d,
-        conics=empty,
-        depths=torch.ones(m),
-        opacities=torch.ones(m),
-        colors=empty,
-        tile_bbox=torch.zeros(m, 4, dtype=torch.int32),
         radii=torch.tensor(radii)[:, None].repeat(1, 2),
     )
 
 
 def test_position_statistics_are_ndc_gradient_norms():
     stats = DensityStats(3, "position")
-    stats.add(fake_projection([0, 2], [[1.0, 0.0], [0.0, 2.0]], [3.0, 7.0]), width=100, height=50, sh_dc_grad=None)
-    stats.add(fake_projection([0], [[0.0, 1.0]], [4.0]), width=100, height=50, sh_dc_grad=None)
+    stats.add(footprints([0, 2], [[1.0, 0.0], [0.0, 2.0]], [3.0, 7.0]), width=100, height=50, sh_dc_grad=None)
+    stats.add(footprints([0], [[0.0, 1.0]], [4.0]), width=100, height=50, sh_dc_grad=None)
     assert stats.count.tolist() == [2, 0, 1]
     assert torch.allclose(stats.mean_grad(), torch.tensor([(50.0 + 25.0) / 2, 0.0, 50.0], dtype=torch.float64))
     assert stats.max_radius.tolist() == [4.0, 0.0, 7.0]
@@ -216,7 +210,7 @@ def test_position_statistics_are_ndc_gradient_norms():
 def test_color_statistics_are_dc_gradient_norms_of_visible_gaussians():
     stats = DensityStats(3, "color")
     dc_grad = torch.tensor([[3.0, 4.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]])
-    stats.add(fake_projection([0, 2, 0], [[0.0, 0.0]] * 3, [1.0, 1.0, 1.0]), 10, 10, sh_dc_grad=dc_grad)
+    stats.add(footprints([0, 2, 0], [[0.0, 0.0]] * 3, [1.0, 1.0, 1.0]), 10, 10, sh_dc_grad=dc_grad)
     assert stats.count.tolist() == [1, 0, 1]
     assert torch.allclose(stats.mean_grad(), torch.tensor([5.0, 0.0, 2.0], dtype=torch.float64))
 

@@ -303,6 +303,45 @@ def test_gsplat_matches_reference_on_cuda():
         assert np.median(np.abs(out.colors[b].double().cpu().numpy() - ref.color)) < 1e-4
 
 
+def footprint_gradients(backend: str, device: str) -> dict[int, tuple[torch.Tensor, torch.Tensor]]:
+    """{camera * N + Gaussian: (2D mean, its gradient)} of a squared-error loss, as density control reads them."""
+    gaussians = [t.to(device).requires_grad_() for t in random_gaussians(300, 3, seed=8)]
+    viewmats, ks = (t.to(device) for t in two_cameras())
+    target = torch.rand(2, 47, 61, 3, generator=torch.Generator().manual_seed(1)).to(device)
+    out = rasterization(*gaussians, viewmats, ks, 61, 47, sh_degree=3, backend=backend, render_depth=False)
+    assert out.backend == backend
+    f = out.footprints
+    f.means2d.retain_grad()
+    ((out.colors - target) ** 2).sum().backward()
+    keys = (f.cam_ids * 300 + f.gauss_ids).tolist()
+    return dict(zip(keys, zip(f.means2d.detach().double().cpu(), f.means2d.grad.double().cpu())))
+
+
+def assert_same_footprints(got: dict, want: dict, *, seen: float, means_tol: float, grad_rel: float) -> None:
+    """Most pairs seen by both, at the same 2D means, with the same gradients there (relative norm)."""
+    common = sorted(got.keys() & want.keys())
+    assert len(common) >= seen * len(want) and len(common) >= seen * len(got)
+    stacked = {name: [torch.stack([d[k][i] for k in common]) for i in (0, 1)] for name, d in (("g", got), ("w", want))}
+    assert torch.allclose(stacked["g"][0], stacked["w"][0], atol=means_tol)
+    g, w = stacked["g"][1], stacked["w"][1]
+    assert torch.linalg.norm(g - w) <= grad_rel * torch.linalg.norm(w)
+
+
+@pytest.mark.skipif("cpu" not in BACKENDS, reason="the compiled CPU kernel is not available here")
+def test_cpu_footprints_carry_the_torch_backends_gradients():
+    """Density control reads the compiled kernel's entries as the torch backend's: same pairs, means, gradients."""
+    got, want = footprint_gradients("cpu", "cpu"), footprint_gradients("torch", "cpu")
+    assert_same_footprints(got, want, seen=0.99, means_tol=1e-4, grad_rel=1e-3)
+
+
+@pytest.mark.skipif(not gsplat_backend.available(), reason="gsplat backend needs CUDA and the gsplat package")
+def test_gsplat_footprints_carry_the_torch_backends_gradients_on_cuda():
+    """gsplat renders packed, so density control reads its visible pairs and their 2D-mean gradients as the torch
+    backend's (its 3-sigma footprint differs at faint rims, hence the tolerances)."""
+    got, want = footprint_gradients("gsplat", "cuda"), footprint_gradients("torch", "cuda")
+    assert_same_footprints(got, want, seen=0.9, means_tol=1e-3, grad_rel=0.1)
+
+
 def test_render_real_scene_backends_agree(shared):
     """The shared donut through the scene-level API: both CPU backends give the same image and depth."""
     if len(BACKENDS) < 2:

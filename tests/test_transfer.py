@@ -259,8 +259,8 @@ def test_laid_out_start_is_deterministic(cache):
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_transfer_runs_on_cuda_as_on_the_cpu(cache):
     """The whole default path on the GPU (layout with shade, GT² prior links, AFCM, GPB, densification,
-    skipped views, metrics, mixed precision): its laid-out start is the CPU's, and a short run ends
-    with finite colours measured as the same run on the CPU measures."""
+    skipped views, metrics, mixed precision; gsplat where installed): its laid-out start is the CPU's, and a
+    short run ends with as many splats and finite colours measured as the same run on the CPU measures."""
     on_cpu = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, device="cpu", **LAID_OUT_START)).scene
     on_gpu = transfer(blob_scene(), stripes(), None, tiny(cache_dir=cache, device="cuda", **LAID_OUT_START)).scene
     assert len(on_gpu) == len(on_cpu)
@@ -271,5 +271,6 @@ def test_transfer_runs_on_cuda_as_on_the_cpu(cache):
     runs = {device: transfer(blob_scene(), stripes(), None, tiny(device=device, **short)) for device in ("cpu", "cuda")}
     gpu = runs["cuda"]
     assert gpu.report["device"].startswith("cuda") and torch.isfinite(gpu.scene.sh_dc).all()
+    assert len(gpu.scene) == pytest.approx(len(runs["cpu"].scene), rel=0.03)  # densified alike, whichever backend
     for metric in ("texture_match", "ssim"):
         assert gpu.report["metrics"][metric] == pytest.approx(runs["cpu"].report["metrics"][metric], abs=0.03)

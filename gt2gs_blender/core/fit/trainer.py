@@ -143,18 +143,17 @@ class Trainer:
         track_position = (
             in_window
             and cfg.densify.grad_source == "position"
-            and out.projection is not None
-            and out.projection.means2d.requires_grad
+            and out.footprints.means2d.requires_grad
         )
         if track_position:
-            out.projection.means2d.retain_grad()
+            out.footprints.means2d.retain_grad()
         loss = reconstruction_loss(out.colors[0], self.images[view], cfg.lambda_dssim)
         loss.backward()
         stepped = self.opt.step(loss)
         self.iteration += 1
-        if in_window and stepped and out.projection is not None:
+        if in_window and stepped:
             camera = self.cameras[view]
-            self.stats.add(out.projection, camera.width, camera.height, self.scene.sh_dc.grad)
+            self.stats.add(out.footprints, camera.width, camera.height, self.scene.sh_dc.grad)
         self.opt.zero_grad()
         if in_window:
             self._density_control()

@@ -19,7 +19,7 @@ import torch
 from ..cameras.camera import Camera, stack_cameras
 from ..scene.gaussians import GaussianScene
 from . import cpu_backend, gsplat_backend, torch_backend
-from .projection import Projection, project
+from .projection import Footprints, project
 
 BACKENDS = ("torch", "cpu", "gsplat")
 log = logging.getLogger(__name__)
@@ -27,14 +27,14 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class RenderOutput:
-    """Renders of B cameras. ``projection`` holds the visible (camera, Gaussian) entries with their
-    differentiable 2D means (for densification statistics); None for the gsplat backend."""
+    """Renders of B cameras. ``footprints`` holds the visible (camera, Gaussian) entries with their
+    differentiable 2D means and extents (for densification statistics), from every backend."""
 
     colors: torch.Tensor  # (B, H, W, D) composited over the background
     depths: torch.Tensor | None  # (B, H, W) expected depth sum T*alpha*z (not divided by alpha)
     alphas: torch.Tensor  # (B, H, W)
     backend: str
-    projection: Projection | None = None
+    footprints: Footprints
 
 
 def available_backends(device: torch.device | str = "cpu") -> list[str]:
@@ -92,18 +92,18 @@ def rasterization(
     inputs = (means, quats, scales, opacities, colors, viewmats, ks, width, height)
     options = {"sh_degree": sh_degree, "near_plane": near_plane, "far_plane": far_plane, "with_depth": render_depth}
     if name == "gsplat":
-        image, alpha = gsplat_backend.rasterize(*inputs, **options)
-        proj = None
+        image, alpha, footprints = gsplat_backend.rasterize(*inputs, **options)
     else:
         backend_module = cpu_backend if name == "cpu" else torch_backend
         projector = cpu_backend.project if name == "cpu" else project
         proj = projector(*inputs, **options)
         image, alpha = backend_module.composite(proj, n_cams, width, height)
+        footprints = proj.footprints()
     rgb, depth = (image[..., :-1], image[..., -1]) if render_depth else (image, None)
     if backgrounds is not None:
         bg = backgrounds.reshape(-1, 1, 1, rgb.shape[-1]) if backgrounds.dim() == 2 else backgrounds
         rgb = rgb + (1.0 - alpha[..., None]) * bg
-    return RenderOutput(colors=rgb, depths=depth, alphas=alpha, backend=name, projection=proj)
+    return RenderOutput(colors=rgb, depths=depth, alphas=alpha, backend=name, footprints=footprints)
 
 
 def render(

@@ -24,6 +24,18 @@ bounds the footprints of Gaussians far off-screen."""
 
 
 @dataclass
+class Footprints:
+    """Where each visible (camera, Gaussian) entry lands on screen: what density control reads.
+
+    Every backend gives these, so densification works the same whichever one renders."""
+
+    cam_ids: torch.Tensor  # (M,) int64
+    gauss_ids: torch.Tensor  # (M,) int64
+    means2d: torch.Tensor  # (M, 2) pixels, differentiable (retain_grad() before backward for its gradient)
+    radii: torch.Tensor  # (M, 2) half-extents in pixels of the footprint
+
+
+@dataclass
 class Projection:
     """Visible entries of all cameras; tensors are (M, ...) and differentiable where float."""
 
@@ -36,6 +48,10 @@ class Projection:
     colors: torch.Tensor  # (M, D)
     tile_bbox: torch.Tensor  # (M, 4) int32 inclusive tile rectangle x0, y0, x1, y1
     radii: torch.Tensor  # (M, 2) half-extents in pixels of the alpha >= 1/255 footprint
+
+    def footprints(self) -> Footprints:
+        """The entries' screen positions and extents (the same tensors, so gradients reach them)."""
+        return Footprints(self.cam_ids, self.gauss_ids, self.means2d, self.radii)
 
 
 def tile_grid(width: int, height: int) -> tuple[int, int]:

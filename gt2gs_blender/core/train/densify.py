@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import torch
 
-from ..render.projection import Projection
+from ..render.projection import Footprints
 from ..scene.gaussians import quats_to_rotmats
 from .optim import GaussianAdam
 
@@ -76,15 +76,15 @@ class DensityStats:
     def __len__(self) -> int:
         return int(self.count.shape[0])
 
-    def add(self, projection: Projection, width: int, height: int, sh_dc_grad: torch.Tensor | None) -> None:
-        """Add one step's statistics, after backward. ``position`` needs ``projection.means2d.grad``
+    def add(self, footprints: Footprints, width: int, height: int, sh_dc_grad: torch.Tensor | None) -> None:
+        """Add one step's statistics, after backward. ``position`` needs ``footprints.means2d.grad``
         (call ``retain_grad()`` on it before backward); ``color`` needs the f_dc gradient (N, 3)."""
-        ids = projection.gauss_ids
+        ids = footprints.gauss_ids
         if self.source == "position":
-            if projection.means2d.grad is None:
+            if footprints.means2d.grad is None:
                 return
-            ndc = projection.means2d.grad.detach() * torch.tensor(
-                [width / 2.0, height / 2.0], dtype=projection.means2d.dtype, device=ids.device
+            ndc = footprints.means2d.grad.detach() * torch.tensor(
+                [width / 2.0, height / 2.0], dtype=footprints.means2d.dtype, device=ids.device
             )
             self.grad_sum.index_add_(0, ids, ndc.norm(dim=-1).double())
             self.count.index_add_(0, ids, torch.ones_like(ids))
@@ -94,7 +94,7 @@ class DensityStats:
             seen = torch.unique(ids)
             self.grad_sum.index_add_(0, seen, sh_dc_grad.detach()[seen].norm(dim=-1).double())
             self.count.index_add_(0, seen, torch.ones_like(seen))
-        radius = projection.radii.detach().max(dim=-1).values.float()
+        radius = footprints.radii.detach().max(dim=-1).values.float()
         self.max_radius.scatter_reduce_(0, ids, radius, reduce="amax")
 
     def mean_grad(self) -> torch.Tensor:

@@ -203,8 +203,8 @@ class Styliser:
         if cfg.stylise_geometry:
             loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
-        if densify and out.projection is not None:
-            self.stats.add(out.projection, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
+        if densify:
+            self.stats.add(out.footprints, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
         self._step(loss)
         self.cursor = (self.cursor + 1) % len(self.order)
         self.report.stylise_steps += 1
