@@ -101,6 +101,30 @@ def test_split_keeps_the_mean_and_the_covariance_in_the_plane():
         assert torch.equal(children.opacity_logits[kids], parent.opacity_logits[i].expand(4))
 
 
+def test_a_needle_splits_along_its_length_only():
+    """A splat coarse along one axis only halves along it (1 x 2): the children keep its width, so they grow
+    rounder instead of thinner, and together keep its mean and second moment."""
+    angle = 0.4
+    quat = torch.tensor([[math.cos(angle / 2), 0.0, 0.0, math.sin(angle / 2)]])  # turned about z
+    needle = GaussianScene(
+        means=torch.tensor([[0.1, -0.2, 0.3]]),
+        quats=quat,
+        log_scales=torch.log(torch.tensor([[0.4, 0.02, 0.01]])),
+        opacity_logits=torch.zeros(1),
+        sh_dc=torch.zeros(1, 3),
+        sh_rest=torch.zeros(1, 0, 3),
+    )
+    once, source = split_coarse(needle, max_sigma=0.3, max_count=100)
+    assert len(once) == 2 and source.tolist() == [0, 0]
+    assert torch.allclose(once.scales, torch.tensor([[0.24, 0.02, 0.01]]).expand(2, 3), atol=1e-6)
+    long_axis = quats_to_rotmats(quat)[0][:, 0]
+    offsets = once.means - needle.means
+    assert torch.allclose(offsets, torch.outer(torch.tensor([-0.32, 0.32]), long_axis), atol=1e-6)
+    assert float((0.24**2 + (offsets @ long_axis) ** 2).mean()) == pytest.approx(0.4**2, rel=1e-5)
+    thrice, _ = split_coarse(needle, max_sigma=0.05, max_count=100)
+    assert len(thrice) == 8 and torch.allclose(thrice.scales[:, 1:], torch.tensor([0.02, 0.01]).expand(8, 2))
+
+
 def test_split_stops_at_the_size_and_the_count():
     """Splits only splats above the size, and never past the count."""
     scene = wall(n=20)

@@ -20,9 +20,10 @@ every view agrees on.
   plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
   sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
   scale axis of a 3DGS splat is a poor normal (a third within 25° of the surface's on the donut).
-- The optimisation runs on the scene's own splats (its time grows with their count); at the end,
-  splats coarser than the texture's detail are split 2 x 2 in the plane of their two largest axes
-  (children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
+- Before the optimisation (``split_first``), or after it on the scene's own splats (faster: the time
+  grows with their count), splats coarser than the texture's detail are split in two along each of their two largest axes
+  that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder instead of thinner;
+  children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
   edge can lie between splats, and each child takes the layout's colour at its place plus what the
   optimisation changed on its parent. At the donut's 45k splats no plank shows; at ~420k they do.
 - While the GT² loss refines the look, a layout term keeps the structure: each view's render is
@@ -42,6 +43,7 @@ every view agrees on.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -73,11 +75,11 @@ DEPTH_TOLERANCE = 0.03
 BLEND_POWER = 8.0
 """Tri-planar blend weights |n_i|^p: sharp transitions (little ghosting) that still blend at 45°."""
 SPLIT_OFFSET = 0.8
-"""Children sit at +-0.8 sigma along the parent's two largest axes ..."""
+"""Children sit at +-0.8 sigma along each split axis ..."""
 SPLIT_SHRINK = 0.6
 """... with 0.6 of its scale there: 0.8^2 + 0.6^2 = 1 keeps the parent's second moment."""
 SPLIT_PASSES = 3
-"""At most three 2 x 2 splits (64 children) per splat."""
+"""At most three splits (up to 64 children) per splat."""
 PREFILTER = 0.5
 """A splat samples the texture blurred by half its largest sigma (in texture pixels) ..."""
 PYRAMID_LEVELS = 8
@@ -208,40 +210,43 @@ def _nearest_depth(views: ViewSet, n_scales: int) -> float:
 
 
 def split_coarse(scene: GaussianScene, max_sigma: float, max_count: int) -> tuple[GaussianScene, torch.Tensor]:
-    """Split splats whose largest sigma exceeds ``max_sigma`` 2 x 2 in their plane, up to
-    ``SPLIT_PASSES`` times and while the scene stays within ``max_count`` splats (largest first).
+    """Split splats whose largest sigma exceeds ``max_sigma`` in two along each of their two largest axes
+    that does (2 x 2 in their plane, 1 x 2 along a needle), up to ``SPLIT_PASSES`` times and while the
+    scene stays within ``max_count`` splats (largest first).
 
     Returns the scene (unsplit splats first, in order, then the children) and each row's source row."""
     source = torch.arange(len(scene), device=scene.device)
     for _ in range(SPLIT_PASSES):
-        largest = scene.scales.detach().max(dim=1).values
-        coarse = largest > max_sigma
-        room = (max_count - len(scene)) // 3
+        top = scene.scales.detach().sort(dim=1, descending=True, stable=True).values
+        coarse = top[:, 0] > max_sigma
+        both = coarse & (top[:, 1] > max_sigma)
+        room = max_count - len(scene)
         if room <= 0 or not bool(coarse.any()):
             break
-        if int(coarse.sum()) > room:  # the largest first, exactly ``room``; ties by row, the same on every device
-            largest_first = torch.sort(largest, descending=True, stable=True).indices[:room]
-            coarse = torch.zeros_like(coarse).index_fill_(0, largest_first, True)
-        children, parents = _split_2x2(scene.subset(coarse)), coarse.nonzero().squeeze(1)
-        scene = concat([scene.subset(~coarse), children])
-        source = torch.cat([source[~coarse], source[parents].repeat(4)])
+        order = torch.sort(top[:, 0], descending=True, stable=True).indices  # ties by row, on every device
+        extra = (torch.where(both, 3, 1) * coarse)[order]
+        chosen = order[coarse[order] & (torch.cumsum(extra, 0) <= room)]
+        split = torch.zeros_like(coarse).index_fill_(0, chosen, True)
+        quads, pairs = (split & both).nonzero().squeeze(1), (split & ~both).nonzero().squeeze(1)
+        children = [_split_along(scene.subset(quads), 2), _split_along(scene.subset(pairs), 1)]
+        scene = concat([scene.subset(~split), *children])
+        source = torch.cat([source[~split], source[quads].repeat(4), source[pairs].repeat(2)])
     return scene, source
 
 
-def _split_2x2(parents: GaussianScene) -> GaussianScene:
-    """Four children per parent, in the plane of its two largest axes (module notes)."""
+def _split_along(parents: GaussianScene, n_axes: int) -> GaussianScene:
+    """2^n_axes children per parent, halving it along its ``n_axes`` largest axes (module notes)."""
     scales = parents.scales.detach()
     rot = quats_to_rotmats(parents.rotations.detach())
     order = scales.argsort(dim=1, descending=True, stable=True)  # equal axes: by index, on every device
     rows = torch.arange(len(parents), device=parents.device)
-    first = rot[rows, :, order[:, 0]] * scales[rows, order[:, 0]][:, None]
-    second = rot[rows, :, order[:, 1]] * scales[rows, order[:, 1]][:, None]
+    axes = [rot[rows, :, order[:, k]] * scales[rows, order[:, k]][:, None] for k in range(n_axes)]
     shrink = torch.zeros_like(scales)
-    shrink[rows, order[:, 0]] = math.log(SPLIT_SHRINK)
-    shrink[rows, order[:, 1]] = math.log(SPLIT_SHRINK)
+    for k in range(n_axes):
+        shrink[rows, order[:, k]] = math.log(SPLIT_SHRINK)
     kids = []
-    for a, b in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
-        offset = SPLIT_OFFSET * (a * first + b * second)
+    for signs in itertools.product((-1, 1), repeat=n_axes):
+        offset = SPLIT_OFFSET * sum(sign * axis for sign, axis in zip(signs, axes, strict=True))
         kids.append(replace(parents, means=parents.means + offset, log_scales=parents.log_scales + shrink))
     return concat(kids)
 
