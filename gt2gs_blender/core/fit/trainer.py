@@ -140,11 +140,7 @@ class Trainer:
         view = self._next_view()
         out = self._render([self.cameras[view]])
         in_window = self.iteration < cfg.densify_end
-        track_position = (
-            in_window
-            and cfg.densify.grad_source == "position"
-            and out.footprints.means2d.requires_grad
-        )
+        track_position = in_window and cfg.densify.grad_source == "position" and out.footprints.means2d.requires_grad
         if track_position:
             out.footprints.means2d.retain_grad()
         loss = reconstruction_loss(out.colors[0], self.images[view], cfg.lambda_dssim)

@@ -21,9 +21,9 @@ every view agrees on.
   sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
   scale axis of a 3DGS splat is a poor normal (a third within 25° of the surface's on the donut).
 - Before the optimisation (``split_first``), or after it on the scene's own splats (faster: the time
-  grows with their count), splats coarser than the texture's detail are split in two along each of their two largest axes
-  that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder instead of thinner;
-  children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
+  grows with their count), splats coarser than the texture's detail are split in two along each of
+  their two largest axes that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder
+  instead of thinner; children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
   edge can lie between splats, and each child takes the layout's colour at its place plus what the
   optimisation changed on its parent. At the donut's 45k splats no plank shows; at ~420k they do.
 - While the GT² loss refines the look, a layout term keeps the structure: each view's render is
