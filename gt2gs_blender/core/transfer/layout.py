@@ -23,9 +23,10 @@ every view agrees on.
 - Before the optimisation (``split_first``), or after it on the scene's own splats (faster: the time
   grows with their count), splats coarser than the texture's detail are split in two along each of
   their two largest axes that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder
-  instead of thinner; children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), so a plank
-  edge can lie between splats, and each child takes the layout's colour at its place plus what the
-  optimisation changed on its parent. At the donut's 45k splats no plank shows; at ~420k they do.
+  instead of thinner; children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second
+  moment), so a plank edge can lie between splats, and each child takes the layout's colour at its
+  place plus what the optimisation changed on its parent. At the donut's 45k splats no plank shows;
+  at ~320k they do.
 - While the GT² loss refines the look, a layout term keeps the structure: each view's render is
   matched pixel for pixel to the layout as an ideal surface shows it (``layout_images``); alone,
   the nearest-feature loss turns laid-out planks back into grain within a few hundred steps.
