@@ -517,3 +517,25 @@ def test_splitting_first_lays_out_the_same_start(shared, tmp_path):
     assert len(first) == len(at_end) > 2 * len(scene)
     assert torch.equal(first.means, at_end.means)
     assert torch.allclose(first.sh_dc, at_end.sh_dc, atol=1e-5)
+
+
+@pytest.mark.parametrize("split_first", [True, False])
+def test_the_split_budget_bounds_the_saved_splats(shared, tmp_path, split_first):
+    """Split Budget caps what the detail split adds, whichever order it runs in: 1 leaves the wall's count,
+    2 at most doubles it, and the default (12) makes more than 2 would."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam, _ = half_dark_wall()
+    texture = stripes(period=16, size=64)
+    counts = {
+        budget: len(
+            transfer(
+                scene, texture, [cam], zero_step_config(shared, tmp_path, split_budget=budget, split_first=split_first)
+            ).scene
+        )
+        for budget in (1.0, 2.0, 12.0)
+    }
+    assert counts[1.0] == len(scene)
+    assert len(scene) < counts[2.0] <= 2 * len(scene) < counts[12.0] <= 12 * len(scene)
+    with pytest.raises(ValueError, match="split_budget"):
+        TransferConfig(split_budget=0.5)

@@ -90,6 +90,7 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "shade_softness": lambda s: s.layout and s.keep_shading,
     "split_size": lambda s: s.layout,
     "split_first": lambda s: s.layout and s.split_size > 0,
+    "split_budget": lambda s: s.layout and s.split_size > 0,
     "lambda_layout": lambda s: s.layout,
 }
 """Settings a run uses only when another one allows it: greyed out otherwise, as Blender does."""

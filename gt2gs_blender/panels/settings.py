@@ -39,6 +39,7 @@ PREVIEWED = (
     "shade_softness",
     "texture_repeats",
     "split_size",
+    "split_budget",
 )
 """Settings the orientation preview shows: changing one re-renders it when the user asked for that."""
 

@@ -143,11 +143,20 @@ class TransferConfig:
     split_size: float = setting(
         0.015,
         "Split Splats Above",
-        "With Lay Out Texture on, splats larger than this share of one texture repeat are split (up to "
-        "12 times as many splats), so the texture's lines can run between them; 0: never split",
+        "With Lay Out Texture on, splats larger than this share of one texture repeat are split (within "
+        "Split Budget), so the texture's lines can run between them; 0: never split",
         "texture",
         min=0.0,
         max=1.0,
+    )
+    split_budget: float = setting(
+        12.0,
+        "Split Budget",
+        "The most splats Split Splats Above may make, as a multiple of the object's: larger draws finer "
+        "lines where the splats are coarse, but the saved file and the run grow with it (1: never split)",
+        "texture",
+        min=1.0,
+        soft_max=24.0,
     )
     split_first: bool = setting(
         True,
@@ -508,6 +517,8 @@ class TransferConfig:
             raise ValueError(
                 f"need texture_repeats >= 0 and 0 <= split_size <= 1, got {self.texture_repeats}, {self.split_size}"
             )
+        if not self.split_budget >= 1.0:
+            raise ValueError(f"split_budget must be >= 1 (a multiple of the object's splats), got {self.split_budget}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
         for name in ("device", "features", "backend"):

@@ -441,8 +441,9 @@ def with_colours(scene: GaussianScene, rgb: torch.Tensor, rows: torch.Tensor | N
     )
 
 
-MAX_GROWTH = 12
-"""Splitting for detail stops when the restyled splats reach this many times their count."""
+def split_limit(count: int, config: TransferConfig) -> int:
+    """The most splats the detail split may leave of ``count`` restyled ones: ``split_budget`` times as many."""
+    return math.floor(config.split_budget * count)
 
 
 def lay_out(
@@ -589,7 +590,7 @@ def split_for_detail(
     """``scene`` with ``rows`` (all when None) split where coarser than ``split_size`` repeats, before the
     optimisation: the split rows move to the end; returns the scene, the new rows mask and ``shade`` per row."""
     part = scene if rows is None else scene.subset(rows)
-    fine, source = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
+    fine, source = split_coarse(part, config.split_size * frame.repeat, split_limit(len(part), config))
     if shade is not None:
         shade = shade[source] if rows is None else torch.cat([shade[~rows], shade[rows][source]])
     return *_rejoin(scene, rows, fine), shade
@@ -623,7 +624,7 @@ def add_detail(
     minus ``start_colours``). The split rows move to the end; returns the scene and the new rows mask."""
     part = scene if rows is None else scene.subset(rows)
     change = part.base_colors - (start_colours if rows is None else start_colours[rows]).to(part.sh_dc)
-    fine, source = split_coarse(part, config.split_size * frame.repeat, MAX_GROWTH * len(part))
+    fine, source = split_coarse(part, config.split_size * frame.repeat, split_limit(len(part), config))
     colours = layout_colours(fine, _normals_for(fine, views, frame), texture, frame, config.angle)
     if shade is not None:
         colours = colours * (shade if rows is None else shade[rows])[source, None].to(colours)
