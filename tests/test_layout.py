@@ -284,7 +284,8 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     started = transfer(scene, texture, [cam], config).scene
     expected = render(started, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
     preview = layout_preview(scene, texture, [cam], config, size=96)
-    assert np.abs(preview.astype(np.float32) - expected).max() <= 1.0
+    assert preview.splats == len(started)
+    assert np.abs(preview.image.astype(np.float32) - expected).max() <= 1.0
 
 
 def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
@@ -310,7 +311,7 @@ def test_the_sketch_preview_takes_the_texture_size_the_run_derives(shared, tmp_p
 
     scene, cam = wall(n=100), front_camera(96)
     config = wall_config(shared, tmp_path, layout=False, texture_repeats=2.0, texture_height=256)
-    image = preview(scene, stripes(period=32, size=128), [cam], config, size=96)
+    image = preview(scene, stripes(period=32, size=128), [cam], config, size=96).image
     views = render_views(scene, [cam], torch.ones(3), "auto")
     height = texture_height_for(layout_frame(scene, views, config), views, config.n_scales)
     grey = image.astype(np.float32).mean(-1)[20:-20, 20:-20].mean(0)
@@ -359,7 +360,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     assert float(colours[on_left].mean()) == pytest.approx(dark, abs=0.02)
     assert float(colours[on_right].mean()) == pytest.approx(1.0, abs=0.02)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
+    assert np.abs(layout_preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
     # the layout term's target is shaded the same way, per pixel from the view's own luminance
     views = render_views(scene, [cam], torch.zeros(3), "auto")
     (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, shaded=keep)
@@ -389,7 +390,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     one_width = 0.35 + 0.65 * (0.2 + 0.6 * 0.1587) / 0.8  # a Gaussian's tail beyond one sigma: 15.87 %
     assert float(colours[(x + 0.1).abs() < 0.02].mean()) == pytest.approx(one_width, abs=0.03)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    assert np.abs(layout_preview(scene, white, [cam], config, size=96).astype(np.float32) - expected).max() <= 1.0
+    assert np.abs(layout_preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
     views = render_views(scene, [cam], torch.zeros(3), "auto")
     frame = layout_frame(scene, views, config)
     (ideal,) = layout_images(views, white, frame, 0.0, True, shade_width(frame, config))

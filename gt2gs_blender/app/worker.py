@@ -15,7 +15,8 @@ are a caller's temporary exports (default: the file paths).
 Events go to stdout as JSON lines (stray prints of libraries are sent to stderr instead):
 ``{"event": "progress", "stage", "step", "total", "fraction", "eta_s", "message", "preview"}`` (the
 preview is the path of a PNG frame, written atomically, or null), then exactly one of
-``{"event": "done", "output", "report"}``, ``{"event": "cancelled"}`` or
+``{"event": "done", "output", "report"}`` (a preview adds ``"splats"``, what the run will start from, and
+``"scene_splats"``, the input's), ``{"event": "cancelled"}`` or
 ``{"event": "error", "message"}``. Exit status: 0 done, 1 internal error, 2 unusable input,
 3 cancelled (a cancel file appeared or SIGTERM arrived), 4 out of memory (an allocation failed; the
 message says what to lower). Outputs are written atomically and only on success, so a cancelled or
@@ -165,8 +166,9 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
         if isinstance(views, list)
         else auto_views(scene, views or config.n_views, width=config.resolution, height=config.resolution)
     )
-    write_png(spec.output, preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size))
-    events("done", output=str(spec.output), report=None)
+    shown = preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size)
+    write_png(spec.output, shown.image)
+    events("done", output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
 
 
 def run(job_file: str | os.PathLike, events: Events) -> int:

@@ -57,6 +57,8 @@ class JobStatus:
     output: str | None = None
     report: dict[str, Any] | None = None
     error: str | None = None
+    splats: tuple[int, int] | None = None
+    """A preview's splat counts: what the run will start from, and the input's."""
 
     @property
     def finished(self) -> bool:
@@ -168,6 +170,8 @@ class Job:
             status.preview = event.get("preview") or status.preview
         elif kind == "done":
             status.output = event.get("output")
+            if event.get("splats") and event.get("scene_splats"):
+                status.splats = int(event["splats"]), int(event["scene_splats"])
             report = event.get("report")
             if report and os.path.isfile(report):
                 with open(report, encoding="utf-8") as f:

@@ -223,9 +223,9 @@ def selected_points(obj) -> np.ndarray:
     return indices
 
 
-def show_preview(path: str, first_view: str) -> None:
+def show_preview(path: str, first_view: str, splats: tuple[int, int] | None = None) -> None:
     """Load a PNG frame of ``first_view`` into the panel's preview image (an ImagePreview, not a datablock of
-    the file)."""
+    the file); ``splats``: the finished preview's counts (the run's start, the object's)."""
     image = bpy.data.images.load(path, check_existing=False)
     try:
         width, height = image.size
@@ -240,6 +240,7 @@ def show_preview(path: str, first_view: str) -> None:
     preview.image_size = (width, height)
     preview.image_pixels_float.foreach_set(pixels)
     _previews["first_view"] = first_view
+    _previews["splats"] = splats
 
 
 def preview_icon() -> int:
@@ -255,10 +256,22 @@ def preview_caption() -> str:
     return f"First view: {shown}; the Orientation angle is measured here" if shown else ""
 
 
+def preview_splats_text() -> str:
+    """How many splats the previewed run will save (the detail split makes the file grow), or "" when unknown."""
+    counts = _previews.get("splats")
+    if not counts:
+        return ""
+    start, scene = counts
+    if start == scene:
+        return f"The result keeps about {scene:,} splats"
+    return f"The result will have about {start:,} splats, {start / scene:.1f}x the object's {scene:,}"
+
+
 def release_previews() -> None:
     """Free the preview images (at unregister)."""
     collection = _previews.pop("collection", None)
     _previews.pop("first_view", None)
+    _previews.pop("splats", None)
     if collection is not None:
         bpy.utils.previews.remove(collection)
 
@@ -331,7 +344,7 @@ class TransferRun:
             show_preview(status.preview, self.first_view)
             self.shown_preview = status.preview
         if status.state == DONE and self.kind == "preview" and self.shown_preview != status.output:
-            show_preview(status.output, self.first_view)
+            show_preview(status.output, self.first_view, status.splats)
             self.shown_preview = status.output
         if status.state == DONE and self.kind == "transfer" and self.result_name is None:
             try:

@@ -132,6 +132,9 @@ def _draw_texture_front(layout, context) -> None:
     if icon:
         layout.template_icon(icon_value=icon, scale=10.0)
         layout.label(text=transfer_run.preview_caption(), icon="CAMERA_DATA")
+        splats = transfer_run.preview_splats_text()
+        if splats:
+            layout.label(text=splats, icon="POINTCLOUD_DATA")
 
 
 def _draw_views_front(layout, context) -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import glob
 import math
 import os
+import re
 import resource
 import signal
 import sys
@@ -632,12 +633,22 @@ def test_first_compile_of_the_kernel_is_a_progress_stage(monkeypatch):
     assert transfer_view("blob", status, None).progress_text == "Compiling the CPU rasterizer (first run only) · 0%"
 
 
-def test_orientation_preview_names_the_first_view(blob):
+def test_orientation_preview_names_the_first_view_and_the_result_s_size(blob):
+    """The caption names the view the angle is measured in, and how many splats the run will save: the
+    layout's detail split (on in the preset) makes more than the object has, within Split Budget."""
     assert bpy.ops.gt2gs.preview_orientation(n_views=2) == {"FINISHED"}
     assert transfer_run.preview_caption() == (
         "First view: automatic view 1, in front (Blender's Front view, from -Y), 20° above; "
         "the Orientation angle is measured here"
     )
+    found = re.fullmatch(
+        r"The result will have about ([\d,]+) splats, ([\d.]+)x the object's ([\d,]+)",
+        transfer_run.preview_splats_text(),
+    )
+    assert found, transfer_run.preview_splats_text()
+    start, ratio, count = int(found[1].replace(",", "")), float(found[2]), int(found[3].replace(",", ""))
+    assert count == len(blob.data.points) < start <= bpy.context.scene.gt2gs.split_budget * count
+    assert ratio == pytest.approx(start / count, abs=0.05)
     scene = bpy.context.scene
     for name in ("B cam", "A cam"):
         scene.collection.objects.link(bpy.data.objects.new(name, bpy.data.cameras.new(name)))

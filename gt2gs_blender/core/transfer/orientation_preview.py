@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -95,6 +96,17 @@ def orientation_preview(
     return (np.clip(result, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
+@dataclass(frozen=True)
+class Preview:
+    """What the orientation preview shows an artist before a run."""
+
+    image: np.ndarray
+    """(H, W, 3) uint8: the first view."""
+    splats: int
+    """How many splats the run starts its optimisation from (after the layout's detail split): what the saved
+    file will hold, give or take densification."""
+
+
 @torch.no_grad()
 def layout_preview(
     scene: GaussianScene,
@@ -103,9 +115,9 @@ def layout_preview(
     config: TransferConfig,
     *,
     size: int = 256,
-) -> np.ndarray:
-    """(H, W, 3) uint8: the first of ``cameras`` showing the scene with the texture laid out exactly
-    as a run with ``config`` (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
+) -> Preview:
+    """The first of ``cameras`` showing the scene with the texture laid out exactly as a run with ``config``
+    (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     views, frame = _run_frame(scene, cameras, config)
     shade = layout_shading(scene, None, frame, config)
@@ -114,7 +126,7 @@ def layout_preview(
         laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config, shade)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=views.background, backend=config.backend)
-    return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+    return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
 
 
 def _run_frame(scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig) -> tuple[ViewSet, LayoutFrame]:
@@ -133,16 +145,16 @@ def preview(
     config: TransferConfig,
     *,
     size: int = 256,
-) -> np.ndarray:
-    """(H, W, 3) uint8 of the first of ``cameras`` (the run's views): what a run with ``config`` will lay on
-    ``scene``; with ``texture_repeats`` set, the sketch takes the texture size the run derives from it."""
+) -> Preview:
+    """The first of ``cameras`` (the run's views): what a run with ``config`` will lay on ``scene``; with
+    ``texture_repeats`` set, the sketch takes the texture size the run derives from it."""
     if config.layout:
         return layout_preview(scene, texture, cameras, config, size=size)
     height = config.texture_height
     if config.texture_repeats > 0:
         views, frame = _run_frame(scene, cameras, config)
         height = texture_height_for(frame, views, config.n_scales)
-    return orientation_preview(
+    image = orientation_preview(
         scene,
         texture,
         cameras[0],
@@ -155,3 +167,4 @@ def preview(
         background=config.background,
         backend=config.backend,
     )
+    return Preview(image, len(scene))
