@@ -33,9 +33,9 @@ from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_v
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
 from gt2gs_blender.core.scene.gaussians import concat
 from gt2gs_blender.core.transfer.content import content_and_hidden
+from gt2gs_blender.core.transfer.detail import add_detail
 from gt2gs_blender.core.transfer.layout import (
     LayoutFrame,
-    add_detail,
     lay_out,
     layout_frame,
     layout_images,

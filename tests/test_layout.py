@@ -13,11 +13,11 @@ from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
 from gt2gs_blender.core.transfer.config import TransferConfig
+from gt2gs_blender.core.transfer.detail import split_coarse
 from gt2gs_blender.core.transfer.layout import (
     layout_colours,
     layout_frame,
     layout_images,
-    split_coarse,
     surface_normals,
     texture_height_for,
     with_colours,
@@ -405,7 +405,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
 def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():
     """Against the float64 brute-force weighted Gaussian average over random points: close at every point;
     a constant stays that constant exactly; no blur (sigma 0) returns the values."""
-    from gt2gs_blender.core.transfer.layout import spatial_blur
+    from gt2gs_blender.core.transfer.shade import spatial_blur
 
     g = torch.Generator().manual_seed(0)
     points, values = torch.rand(3000, 3, generator=g), torch.rand(3000, generator=g)
@@ -423,7 +423,7 @@ def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_spatial_blur_takes_and_returns_cuda_tensors():
     """A CUDA run's splats: the blur (on the CPU inside) returns on CUDA, equal to the CPU result."""
-    from gt2gs_blender.core.transfer.layout import spatial_blur
+    from gt2gs_blender.core.transfer.shade import spatial_blur
 
     points, values = torch.rand(500, 3), torch.rand(500)
     out = spatial_blur(points.cuda(), values.cuda(), torch.ones(500).cuda(), 0.1)
@@ -432,7 +432,7 @@ def test_spatial_blur_takes_and_returns_cuda_tensors():
 
 def test_spatial_blur_degenerate_inputs_stay_finite_and_in_range():
     """One point, all points in one place, weights of zero, a far outlier: finite, within the values' range."""
-    from gt2gs_blender.core.transfer.layout import spatial_blur
+    from gt2gs_blender.core.transfer.shade import spatial_blur
 
     one = spatial_blur(torch.zeros(1, 3), torch.tensor([0.7]), torch.ones(1), 0.1)
     assert torch.allclose(one, torch.tensor([0.7]))

@@ -20,31 +20,19 @@ every view agrees on.
   plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
   sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
   scale axis of a 3DGS splat is a poor normal (a third within 25° of the surface's on the donut).
-- Before the optimisation (``split_first``), or after it on the scene's own splats (faster: the time
-  grows with their count), splats coarser than the texture's detail are split in two along each of
-  their two largest axes that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder
-  instead of thinner; children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second
-  moment), so a plank edge can lie between splats, and each child takes the layout's colour at its
-  place plus what the optimisation changed on its parent. At the donut's 45k splats no plank shows;
-  at ~320k they do.
+- Splats coarser than the texture's detail are split (``detail``), so a plank edge can lie
+  between them, each child taking the layout's colour at its own place.
 - While the GT² loss refines the look, a layout term keeps the structure: each view's render is
   matched pixel for pixel to the layout as an ideal surface shows it (``layout_images``); alone,
   the nearest-feature loss turns laid-out planks back into grain within a few hundred steps.
 - Each splat samples the texture prefiltered to its own footprint (no aliasing of thin mortar
   lines into specks), the three planes blended by the normal's components to the 8th power.
-- Light and shade (``keep_shading``): each splat keeps ``layout_shade`` of the texture's brightness, its
-  own original luminance over the bright end of the scene's (floored at ``SHADE_FLOOR``), as the sketch
-  preview shades its texture: laid over a whole capture, the plain texture hid the scene (the fern's
-  SSIM to the original fell from 0.49 to 0.05). The shade follows each splat through densification
-  (an optimiser attachment) to the detail split's children. ``shade_softness`` first averages the
-  luminance over neighbours within that share of a repeat (``spatial_blur``; the layout term's images
-  average their surface points the same way), so only the scene's broad light and dark darkens the
-  texture, not its specks.
+- Light and shade (``keep_shading``): each splat keeps a share of the texture's brightness from the
+  scene's own light and shade (``shade``), averaged over ``shade_softness`` of a repeat.
 """
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -59,11 +47,12 @@ from ..cameras.warp import backproject, expected_depth, reproject
 from ..errors import GT2GSError
 from ..features.specs import RENDER_SCALE
 from ..render import render
-from ..scene.gaussians import GaussianScene, concat, quats_to_rotmats
+from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig
 from .metrics import LUMA
+from .shade import layout_shade, shading, spatial_blur
 from .texture_bank import bank_scales
 from .views import ViewSet
 
@@ -75,12 +64,6 @@ DEPTH_TOLERANCE = 0.03
 """A splat is on the surface a pixel shows when its depth is within this fraction of the pixel's."""
 BLEND_POWER = 8.0
 """Tri-planar blend weights |n_i|^p: sharp transitions (little ghosting) that still blend at 45°."""
-SPLIT_OFFSET = 0.8
-"""Children sit at +-0.8 sigma along each split axis ..."""
-SPLIT_SHRINK = 0.6
-"""... with 0.6 of its scale there: 0.8^2 + 0.6^2 = 1 keeps the parent's second moment."""
-SPLIT_PASSES = 3
-"""At most three splits (up to 64 children) per splat."""
 PREFILTER = 0.5
 """A splat samples the texture blurred by half its largest sigma (in texture pixels) ..."""
 PYRAMID_LEVELS = 8
@@ -93,10 +76,6 @@ NEAREST_PROJECTOR_DEPTH = 0.05
 """Points nearer the projector than this share of its nearest group's depth (or behind it) read the texture
 as if at that depth, instead of an unbounded magnification."""
 PROJECTIONS = ("auto", "box", "view")
-SHADE_FLOOR = 0.35
-"""The darkest shade keeps this share of the texture's brightness, so dark parts of the scene stay textured."""
-SHADE_QUANTILE = 0.95
-"""The bright end of the scene's luminance (full texture brightness): this quantile, so a few specks do not set it."""
 
 
 @dataclass(frozen=True)
@@ -210,48 +189,6 @@ def _nearest_depth(views: ViewSet, n_scales: int) -> float:
     return max(lo + 0.5 * (hi - lo) / max(n_scales, 1), 1e-12)
 
 
-def split_coarse(scene: GaussianScene, max_sigma: float, max_count: int) -> tuple[GaussianScene, torch.Tensor]:
-    """Split splats whose largest sigma exceeds ``max_sigma`` in two along each of their two largest axes
-    that does (2 x 2 in their plane, 1 x 2 along a needle), up to ``SPLIT_PASSES`` times and while the
-    scene stays within ``max_count`` splats (largest first).
-
-    Returns the scene (unsplit splats first, in order, then the children) and each row's source row."""
-    source = torch.arange(len(scene), device=scene.device)
-    for _ in range(SPLIT_PASSES):
-        top = scene.scales.detach().sort(dim=1, descending=True, stable=True).values
-        coarse = top[:, 0] > max_sigma
-        both = coarse & (top[:, 1] > max_sigma)
-        room = max_count - len(scene)
-        if room <= 0 or not bool(coarse.any()):
-            break
-        order = torch.sort(top[:, 0], descending=True, stable=True).indices  # ties by row, on every device
-        extra = (torch.where(both, 3, 1) * coarse)[order]
-        chosen = order[coarse[order] & (torch.cumsum(extra, 0) <= room)]
-        split = torch.zeros_like(coarse).index_fill_(0, chosen, True)
-        quads, pairs = (split & both).nonzero().squeeze(1), (split & ~both).nonzero().squeeze(1)
-        children = [_split_along(scene.subset(quads), 2), _split_along(scene.subset(pairs), 1)]
-        scene = concat([scene.subset(~split), *children])
-        source = torch.cat([source[~split], source[quads].repeat(4), source[pairs].repeat(2)])
-    return scene, source
-
-
-def _split_along(parents: GaussianScene, n_axes: int) -> GaussianScene:
-    """2^n_axes children per parent, halving it along its ``n_axes`` largest axes (module notes)."""
-    scales = parents.scales.detach()
-    rot = quats_to_rotmats(parents.rotations.detach())
-    order = scales.argsort(dim=1, descending=True, stable=True)  # equal axes: by index, on every device
-    rows = torch.arange(len(parents), device=parents.device)
-    axes = [rot[rows, :, order[:, k]] * scales[rows, order[:, k]][:, None] for k in range(n_axes)]
-    shrink = torch.zeros_like(scales)
-    for k in range(n_axes):
-        shrink[rows, order[:, k]] = math.log(SPLIT_SHRINK)
-    kids = []
-    for signs in itertools.product((-1, 1), repeat=n_axes):
-        offset = SPLIT_OFFSET * sum(sign * axis for sign, axis in zip(signs, axes, strict=True))
-        kids.append(replace(parents, means=parents.means + offset, log_scales=parents.log_scales + shrink))
-    return concat(kids)
-
-
 @torch.no_grad()
 def surface_normals(
     scene: GaussianScene, cameras: Sequence[Camera], depths: Sequence[torch.Tensor], alphas: Sequence[torch.Tensor]
@@ -276,7 +213,7 @@ def surface_normals(
     return _fill_unseen(means, normals, best >= 0).float().to(scene.device)
 
 
-def _normals_for(scene: GaussianScene, views: ViewSet, frame: LayoutFrame) -> torch.Tensor:
+def splat_normals(scene: GaussianScene, views: ViewSet, frame: LayoutFrame) -> torch.Tensor:
     """The splats' normals the frame's projection needs: the surface's for the box, none (zeros) for the view."""
     if frame.projector is not None:
         return torch.zeros(len(scene), 3, dtype=scene.dtype, device=scene.device)
@@ -441,11 +378,6 @@ def with_colours(scene: GaussianScene, rgb: torch.Tensor, rows: torch.Tensor | N
     )
 
 
-def split_limit(count: int, config: TransferConfig) -> int:
-    """The most splats the detail split may leave of ``count`` restyled ones: ``split_budget`` times as many."""
-    return math.floor(config.split_budget * count)
-
-
 def lay_out(
     scene: GaussianScene,
     rows: torch.Tensor | None,
@@ -458,7 +390,7 @@ def lay_out(
     """``scene`` with the texture laid on ``rows`` (all when None) in ``frame``, times each splat's ``shade``
     (:func:`layout_shade`; None: the texture's own colours): what the optimisation starts from."""
     part = scene if rows is None else scene.subset(rows)
-    colours = layout_colours(part, _normals_for(part, views, frame), texture, frame, config.angle)
+    colours = layout_colours(part, splat_normals(part, views, frame), texture, frame, config.angle)
     if shade is not None:
         colours = colours * (shade if rows is None else shade[rows])[:, None].to(colours)
     laid = with_colours(part, colours)
@@ -470,22 +402,6 @@ def lay_out(
         sh_dc=scene.sh_dc.index_copy(0, index, laid.sh_dc),
         sh_rest=scene.sh_rest.index_copy(0, index, laid.sh_rest),
     )
-
-
-def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0) -> torch.Tensor:
-    """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its
-    luminance, averaged over its neighbours within about ``softness`` (a world length, 0: its own), over the
-    bright end of those splats' (:func:`shading`); 1 for the other splats."""
-    luminance = scene.base_colors.detach() @ torch.tensor(LUMA, dtype=scene.dtype, device=scene.device)
-    shade = torch.ones_like(luminance)
-    part = slice(None) if rows is None else rows
-    if rows is not None and not bool(rows.any()):
-        return shade
-    seen = luminance[part]
-    if softness > 0:
-        seen = spatial_blur(scene.means.detach()[part], seen, scene.opacities.detach()[part], softness)
-    shade[part] = shading(seen)
-    return shade
 
 
 def layout_shading(
@@ -501,133 +417,3 @@ def layout_shading(
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:
     """The world width the kept light and shade is averaged over: ``shade_softness`` repeats of ``frame``."""
     return config.shade_softness * frame.repeat
-
-
-SPATIAL_GRID = 128
-""":func:`spatial_blur`'s grid has at most this many cells along the scene's longest side ..."""
-SPATIAL_CELLS_PER_SIGMA = 2
-"""... and otherwise this many per sigma."""
-SPATIAL_MIN_WEIGHT = 1e-6
-"""Weights (opacities) below this count as this: among nearly transparent splats the average is a plain one."""
-SPATIAL_BOUNDS_QUANTILE = 0.005
-SPATIAL_BOUNDS_MARGIN = 3.0
-"""The grid spans the points but this share of them on each side, widened by this many sigmas: points
-beyond (floaters) read the grid's border."""
-SPATIAL_BOUNDS_SAMPLE = 1_000_000
-"""The bounds' quantiles come from at most about this many of the points (torch.quantile's size limit)."""
-
-
-def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
-    """(N,) ``values`` at ``points`` averaged over their neighbours with Gaussian weights of width ``sigma``
-    times ``weights``: a normalised convolution on a grid (each point splatted to and read from its eight
-    cells, trilinearly; cells no wider than sigma / 2 unless the grid would exceed ``SPATIAL_GRID`` cells on
-    a side). Outliers beyond the grid read its border but add nothing to it; a point with no weight near it
-    keeps its value. Runs on the CPU (a small grid), returns on ``values``' device."""
-    if not len(points) or sigma <= 0:
-        return values.clone()
-    p = points.detach().float().cpu()
-    v = values.detach().float().cpu()
-    sample = p[:: max(1, len(p) // SPATIAL_BOUNDS_SAMPLE)]
-    margin = SPATIAL_BOUNDS_MARGIN * sigma
-    lo = torch.quantile(sample, SPATIAL_BOUNDS_QUANTILE, dim=0) - margin
-    hi = torch.quantile(sample, 1.0 - SPATIAL_BOUNDS_QUANTILE, dim=0) + margin
-    inside = ((p >= lo) & (p <= hi)).all(dim=1)
-    cell = max(sigma / SPATIAL_CELLS_PER_SIGMA, float((hi - lo).max()) / (SPATIAL_GRID - 2), 1e-12)
-    dims = (torch.floor((hi - lo) / cell).long() + 2).tolist()
-    x = ((p - lo) / cell).clamp(min=torch.zeros(3), max=torch.tensor(dims, dtype=p.dtype) - 1.0 - 1e-4)
-    base = x.floor().long()
-    frac = x - base
-    w = torch.where(inside, weights.detach().float().cpu().clamp_min(SPATIAL_MIN_WEIGHT), 0.0)
-    corners = []
-    for corner in range(8):
-        offset = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
-        share = torch.where(offset.bool(), frac, 1.0 - frac).prod(dim=1)
-        index = base + offset
-        corners.append(((index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2], share))
-    grid = torch.zeros(2, dims[0] * dims[1] * dims[2])
-    for index, share in corners:
-        grid[0].index_add_(0, index, share * w)
-        grid[1].index_add_(0, index, share * w * v)
-    grid = _gaussian_blur_3d(grid.view(2, *dims), sigma / cell).reshape(2, -1)
-    mass = sum(share * grid[0, index] for index, share in corners)
-    total = sum(share * grid[1, index] for index, share in corners)
-    blurred = torch.where(mass > 1e-12, total / mass.clamp_min(1e-12), v)
-    return blurred.to(values)
-
-
-def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:
-    """(C, X, Y, Z) ``grid`` blurred by a Gaussian of ``sigma_cells`` along each axis (zero outside)."""
-    radius = max(1, math.ceil(3.0 * sigma_cells))
-    taps = torch.arange(-radius, radius + 1, dtype=grid.dtype)
-    kernel = torch.exp(-0.5 * (taps / sigma_cells) ** 2)
-    kernel = (kernel / kernel.sum()).view(1, 1, -1)
-    for axis in (1, 2, 3):
-        moved = grid.movedim(axis, -1)
-        shape = moved.shape
-        blurred = F.conv1d(moved.reshape(-1, 1, shape[-1]), kernel, padding=radius)
-        grid = blurred.view(shape).movedim(-1, axis)
-    return grid
-
-
-def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None) -> torch.Tensor:
-    """``SHADE_FLOOR`` + the rest times ``luminance`` over the ``SHADE_QUANTILE`` of ``reference`` (default:
-    ``luminance`` itself), clipped to [0, 1]: the light and shade the layout and the sketch preview keep."""
-    values = (luminance if reference is None else reference).detach().float().reshape(-1)
-    if not len(values):
-        return torch.ones_like(luminance)
-    rank = max(1, round(SHADE_QUANTILE * len(values)))
-    bright = max(float(values.kthvalue(rank).values), 1e-6)
-    return SHADE_FLOOR + (1.0 - SHADE_FLOOR) * (luminance / bright).clamp(0.0, 1.0)
-
-
-def split_for_detail(
-    scene: GaussianScene,
-    rows: torch.Tensor | None,
-    shade: torch.Tensor | None,
-    frame: LayoutFrame,
-    config: TransferConfig,
-) -> tuple[GaussianScene, torch.Tensor | None, torch.Tensor | None]:
-    """``scene`` with ``rows`` (all when None) split where coarser than ``split_size`` repeats, before the
-    optimisation: the split rows move to the end; returns the scene, the new rows mask and ``shade`` per row."""
-    part = scene if rows is None else scene.subset(rows)
-    fine, source = split_coarse(part, config.split_size * frame.repeat, split_limit(len(part), config))
-    if shade is not None:
-        shade = shade[source] if rows is None else torch.cat([shade[~rows], shade[rows][source]])
-    return *_rejoin(scene, rows, fine), shade
-
-
-def _rejoin(
-    scene: GaussianScene, rows: torch.Tensor | None, fine: GaussianScene
-) -> tuple[GaussianScene, torch.Tensor | None]:
-    """``scene``'s splats outside ``rows`` (in order) then ``fine``, the split ``rows`` (all of it when None),
-    and the new rows mask (None when all)."""
-    if rows is None:
-        return fine, None
-    kept = scene.subset(~rows)
-    mask = torch.cat([torch.zeros(len(kept), dtype=torch.bool), torch.ones(len(fine), dtype=torch.bool)])
-    return concat([kept, fine]), mask.to(scene.device)
-
-
-def add_detail(
-    scene: GaussianScene,
-    start_colours: torch.Tensor,
-    rows: torch.Tensor | None,
-    views: ViewSet,
-    texture: np.ndarray,
-    frame: LayoutFrame,
-    config: TransferConfig,
-    shade: torch.Tensor | None = None,
-) -> tuple[GaussianScene, torch.Tensor | None]:
-    """The optimised ``scene`` at the texture's detail: ``rows`` (all when None) split where coarser
-    than ``split_size`` repeats, each child coloured by the layout at its own place times its parent's
-    ``shade`` (as :func:`lay_out` laid it) plus what the optimisation changed on its parent (its colour
-    minus ``start_colours``). The split rows move to the end; returns the scene and the new rows mask."""
-    part = scene if rows is None else scene.subset(rows)
-    change = part.base_colors - (start_colours if rows is None else start_colours[rows]).to(part.sh_dc)
-    fine, source = split_coarse(part, config.split_size * frame.repeat, split_limit(len(part), config))
-    colours = layout_colours(fine, _normals_for(fine, views, frame), texture, frame, config.angle)
-    if shade is not None:
-        colours = colours * (shade if rows is None else shade[rows])[source, None].to(colours)
-    colours = colours + change[source]
-    fine = replace(fine, sh_dc=((colours.clamp(0.0, 1.0) - 0.5) / SH_C0).to(fine.sh_dc))
-    return _rejoin(scene, rows, fine)

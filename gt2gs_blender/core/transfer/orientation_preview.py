@@ -28,8 +28,10 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .layout import LayoutFrame, add_detail, lay_out, layout_frame, layout_shading, shading, texture_height_for
+from .detail import add_detail
+from .layout import LayoutFrame, lay_out, layout_frame, layout_shading, texture_height_for
 from .metrics import LUMA
+from .shade import shading
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
 from .views import ViewSet, render_views

@@ -27,17 +27,9 @@ from . import color_transfer
 from .bank import bank_depth_ratio, build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_and_hidden, content_degree
+from .detail import add_detail, split_for_detail
 from .gt2 import view_order
-from .layout import (
-    add_detail,
-    lay_out,
-    layout_frame,
-    layout_images,
-    layout_shading,
-    shade_width,
-    split_for_detail,
-    texture_height_for,
-)
+from .layout import lay_out, layout_frame, layout_images, layout_shading, shade_width, texture_height_for
 from .metrics import preview_ssim
 from .orientation_preview import preview
 from .region import assemble, region_mask, structure_changed, stylise_start

@@ -1,0 +1,116 @@
+"""The scene's light and shade kept under the laid-out texture (``keep_shading``).
+
+Laid over a whole capture, the plain texture hid the scene (the fern's SSIM to the original fell from 0.49
+to 0.05). Each splat keeps ``layout_shade`` of the texture's brightness: its own original luminance over the
+bright end of the scene's (floored at ``SHADE_FLOOR``), as the sketch preview shades its texture. The shade
+follows each splat through densification (an optimiser attachment) to the detail split's children.
+``shade_softness`` first averages the luminance over neighbours within that share of a repeat
+(``spatial_blur``; the layout term's images average their surface points the same way), so only the
+scene's broad light and dark darkens the texture, not its specks.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+import torch.nn.functional as F
+
+from ..scene.gaussians import GaussianScene
+from .metrics import LUMA
+
+SHADE_FLOOR = 0.35
+"""The darkest shade keeps this share of the texture's brightness, so dark parts of the scene stay textured."""
+SHADE_QUANTILE = 0.95
+"""The bright end of the scene's luminance (full texture brightness): this quantile, so a few specks do not set it."""
+SPATIAL_GRID = 128
+""":func:`spatial_blur`'s grid has at most this many cells along the scene's longest side ..."""
+SPATIAL_CELLS_PER_SIGMA = 2
+"""... and otherwise this many per sigma."""
+SPATIAL_MIN_WEIGHT = 1e-6
+"""Weights (opacities) below this count as this: among nearly transparent splats the average is a plain one."""
+SPATIAL_BOUNDS_QUANTILE = 0.005
+SPATIAL_BOUNDS_MARGIN = 3.0
+"""The grid spans the points but this share of them on each side, widened by this many sigmas: points
+beyond (floaters) read the grid's border."""
+SPATIAL_BOUNDS_SAMPLE = 1_000_000
+"""The bounds' quantiles come from at most about this many of the points (torch.quantile's size limit)."""
+
+
+def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0) -> torch.Tensor:
+    """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its
+    luminance, averaged over its neighbours within about ``softness`` (a world length, 0: its own), over the
+    bright end of those splats' (:func:`shading`); 1 for the other splats."""
+    luminance = scene.base_colors.detach() @ torch.tensor(LUMA, dtype=scene.dtype, device=scene.device)
+    shade = torch.ones_like(luminance)
+    part = slice(None) if rows is None else rows
+    if rows is not None and not bool(rows.any()):
+        return shade
+    seen = luminance[part]
+    if softness > 0:
+        seen = spatial_blur(scene.means.detach()[part], seen, scene.opacities.detach()[part], softness)
+    shade[part] = shading(seen)
+    return shade
+
+
+def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
+    """(N,) ``values`` at ``points`` averaged over their neighbours with Gaussian weights of width ``sigma``
+    times ``weights``: a normalised convolution on a grid (each point splatted to and read from its eight
+    cells, trilinearly; cells no wider than sigma / 2 unless the grid would exceed ``SPATIAL_GRID`` cells on
+    a side). Outliers beyond the grid read its border but add nothing to it; a point with no weight near it
+    keeps its value. Runs on the CPU (a small grid), returns on ``values``' device."""
+    if not len(points) or sigma <= 0:
+        return values.clone()
+    p = points.detach().float().cpu()
+    v = values.detach().float().cpu()
+    sample = p[:: max(1, len(p) // SPATIAL_BOUNDS_SAMPLE)]
+    margin = SPATIAL_BOUNDS_MARGIN * sigma
+    lo = torch.quantile(sample, SPATIAL_BOUNDS_QUANTILE, dim=0) - margin
+    hi = torch.quantile(sample, 1.0 - SPATIAL_BOUNDS_QUANTILE, dim=0) + margin
+    inside = ((p >= lo) & (p <= hi)).all(dim=1)
+    cell = max(sigma / SPATIAL_CELLS_PER_SIGMA, float((hi - lo).max()) / (SPATIAL_GRID - 2), 1e-12)
+    dims = (torch.floor((hi - lo) / cell).long() + 2).tolist()
+    x = ((p - lo) / cell).clamp(min=torch.zeros(3), max=torch.tensor(dims, dtype=p.dtype) - 1.0 - 1e-4)
+    base = x.floor().long()
+    frac = x - base
+    w = torch.where(inside, weights.detach().float().cpu().clamp_min(SPATIAL_MIN_WEIGHT), 0.0)
+    corners = []
+    for corner in range(8):
+        offset = torch.tensor([(corner >> 2) & 1, (corner >> 1) & 1, corner & 1])
+        share = torch.where(offset.bool(), frac, 1.0 - frac).prod(dim=1)
+        index = base + offset
+        corners.append(((index[:, 0] * dims[1] + index[:, 1]) * dims[2] + index[:, 2], share))
+    grid = torch.zeros(2, dims[0] * dims[1] * dims[2])
+    for index, share in corners:
+        grid[0].index_add_(0, index, share * w)
+        grid[1].index_add_(0, index, share * w * v)
+    grid = _gaussian_blur_3d(grid.view(2, *dims), sigma / cell).reshape(2, -1)
+    mass = sum(share * grid[0, index] for index, share in corners)
+    total = sum(share * grid[1, index] for index, share in corners)
+    blurred = torch.where(mass > 1e-12, total / mass.clamp_min(1e-12), v)
+    return blurred.to(values)
+
+
+def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:
+    """(C, X, Y, Z) ``grid`` blurred by a Gaussian of ``sigma_cells`` along each axis (zero outside)."""
+    radius = max(1, math.ceil(3.0 * sigma_cells))
+    taps = torch.arange(-radius, radius + 1, dtype=grid.dtype)
+    kernel = torch.exp(-0.5 * (taps / sigma_cells) ** 2)
+    kernel = (kernel / kernel.sum()).view(1, 1, -1)
+    for axis in (1, 2, 3):
+        moved = grid.movedim(axis, -1)
+        shape = moved.shape
+        blurred = F.conv1d(moved.reshape(-1, 1, shape[-1]), kernel, padding=radius)
+        grid = blurred.view(shape).movedim(-1, axis)
+    return grid
+
+
+def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None) -> torch.Tensor:
+    """``SHADE_FLOOR`` + the rest times ``luminance`` over the ``SHADE_QUANTILE`` of ``reference`` (default:
+    ``luminance`` itself), clipped to [0, 1]: the light and shade the layout and the sketch preview keep."""
+    values = (luminance if reference is None else reference).detach().float().reshape(-1)
+    if not len(values):
+        return torch.ones_like(luminance)
+    rank = max(1, round(SHADE_QUANTILE * len(values)))
+    bright = max(float(values.kthvalue(rank).values), 1e-6)
+    return SHADE_FLOOR + (1.0 - SHADE_FLOOR) * (luminance / bright).clamp(0.0, 1.0)
