@@ -5,7 +5,7 @@
 LPIPS, texture match, coarse long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed,
 then each variant's mean and half-range), writes the records to bench/out/ablation.json (or PATH) and a PNG
 strip per scene beside them (texture, original, then each variant, 3 views; first seed). ``--set`` changes a
-TransferConfig field for every variant: ``--set stylise_geometry=true`` runs the authors' coupled
+TransferConfig field for every variant: ``--set stylise_geometry=on`` runs the authors' coupled
 optimisation, where the GPB has geometry to correct. ``lt_rmse_coarse`` is the long-range RMSE of renders
 blurred by 2 px first: on the donut's views 157 degrees apart the depth warp misregisters fine detail, so
 the plain RMSE grows with how much detail a result carries. "No GT²" is the paper's NNFM loss (Eq. 1):
@@ -41,6 +41,7 @@ import torch
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.common import parse_overrides
 from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.cameras.generate import auto_views, camera_path
@@ -221,11 +222,11 @@ def main() -> None:
         nargs="+",
         default=[],
         metavar="KEY=VALUE",
-        help="TransferConfig overrides for every variant (values in JSON: 1, 0.5, true)",
+        help="TransferConfig overrides for every variant (typed as the setting: 1, 0.5, true, on)",
     )
     parser.add_argument("--json", type=Path, help="records (default bench/out/ablation[_shD].json)")
     args = parser.parse_args()
-    args.overrides = {k: json.loads(v) for k, v in (item.split("=", 1) for item in args.set)}
+    args.overrides = parse_overrides(args.set)
     suffix = f"_sh{args.sh_degree}" if args.sh_degree else ""
     args.json = args.json or OUT / f"ablation{suffix}.json"
     OUT.mkdir(parents=True, exist_ok=True)

@@ -44,7 +44,6 @@ import json
 import os
 import sys
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -57,10 +56,10 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
+from common import parse_overrides
 from recognise_scenes import BenchScene, RunStart, layout_start, layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
-from gt2gs_blender.core.transfer.config import _python_type
 from gt2gs_blender.core.transfer.metrics import masked_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
 
@@ -79,30 +78,6 @@ SHEET_VIEWS = 2
 # ---------------------------------------------------------------------------------------------------
 # Settings
 # ---------------------------------------------------------------------------------------------------
-def parse_overrides(pairs: list[str]) -> dict[str, Any]:
-    """``name=value`` strings typed by the TransferConfig field they name (the config's own types)."""
-    types = {f.name: f.type for f in fields(TransferConfig)}
-    out: dict[str, Any] = {}
-    for pair in pairs:
-        name, sep, text = pair.partition("=")
-        if not sep or name not in types:
-            raise SystemExit(f"--set {pair!r}: expected NAME=VALUE with NAME one of {', '.join(types)}")
-        annotation = str(types[name])
-        if text == "None" and "None" in annotation:
-            out[name] = None
-            continue
-        kind = _python_type(annotation)
-        if kind is bool:
-            if text.lower() not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
-                raise SystemExit(f"--set {pair!r}: not a yes/no value")
-            out[name] = text.lower() in ("1", "true", "yes", "on")
-        elif kind is tuple:
-            out[name] = tuple(float(v) for v in text.split(","))
-        else:
-            out[name] = kind(text)
-    return out
-
-
 def texture_path(name: str) -> Path:
     found = sorted(TEXTURES.glob(f"{name}.*"))
     if not found:

@@ -19,15 +19,14 @@ import pstats
 import sys
 import tempfile
 import time
-from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from bench.common import parse_overrides
 from gt2gs_blender.core.scene.ply import read_ply
-from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.metrics import peak_memory_mib
 from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.presets import preset
@@ -55,26 +54,6 @@ PROFILE_PARTS: dict[str, tuple[tuple[str, str], ...]] = {
 }
 """Profile rows: the summed cumulative time of the listed (file suffix, function) pairs; a call
 nested in another listed one of the same row is not counted twice (cProfile's cumulative time)."""
-
-
-def parse_overrides(pairs: list[str]) -> dict[str, Any]:
-    """``key=value`` strings typed by the TransferConfig field they name."""
-    types = {f.name: f.type for f in fields(TransferConfig)}
-    out: dict[str, Any] = {}
-    for pair in pairs:
-        key, _, text = pair.partition("=")
-        if key not in types:
-            raise SystemExit(f"unknown setting {key!r}")
-        kind = str(types[key])
-        if kind.startswith("bool"):
-            out[key] = text.lower() in ("1", "true", "yes", "on")
-        elif kind.startswith("int"):
-            out[key] = int(text)
-        elif kind.startswith("float"):
-            out[key] = float(text)
-        else:
-            out[key] = None if text == "None" else text
-    return out
 
 
 def profile_rows(stats: pstats.Stats) -> dict[str, float]:

@@ -373,6 +373,7 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
         "--no-afcm",
         "--no-gpb",
         "--stylise-geometry",
+        "on",
         "--no-densify",
         "--no-skip-hidden",
         "--no-mixed-precision",
@@ -396,7 +397,7 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
         config[k] for k in ("gt2", "afcm", "gpb", "densify", "skip_hidden", "mixed_precision")
     )
     assert config["threads"] == 1 and config["texture_height"] == 96
-    assert config["stylise_geometry"] and config["object_backdrop"]
+    assert config["stylise_geometry"] == "on" and config["object_backdrop"]
     assert config["depth_ratio"] == 1.5
 
 

@@ -55,8 +55,8 @@ def test_choices_are_the_engines_own():
             {"stylise_steps": 12, "gpb": False, "angle": 30.0, "background": (0.0, 0.5, 1.0)},
         ),
         (
-            ("--no-plateau-stop", "--full-matching", "--stylise-geometry", "--lambda-prior", "0.01"),
-            {"plateau_window": 0, "match_channels": 0, "stylise_geometry": True, "lambda_prior": 0.01},
+            ("--no-plateau-stop", "--full-matching", "--stylise-geometry", "on", "--lambda-prior", "0.01"),
+            {"plateau_window": 0, "match_channels": 0, "stylise_geometry": "on", "lambda_prior": 0.01},
         ),
         (("--preset", "preview", "--weights", "w.pth", "--threads", "2"), {"weights_path": "w.pth", "threads": 2}),
     ],

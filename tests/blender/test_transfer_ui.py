@@ -322,12 +322,12 @@ def test_panel_settings_and_keywords_become_the_job_config(fresh):
     preset, config = transfer_run.config_overrides(fresh.context, {})
     assert preset == "balanced" and config["resolution"] == 384 and make_preset(preset, **config) == PRESETS["balanced"]
     settings.stylise_steps, settings.gpb, settings.angle, settings.texture_height = 12, False, math.radians(15), 96
-    settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = True, 2.0, True
+    settings.stylise_geometry, settings.depth_ratio, settings.object_backdrop = "on", 2.0, True
     settings.background = (0.0, 0.5, 1.0)
     _, config = transfer_run.config_overrides(fresh.context, {})
     made = make_preset("balanced", **config)
     assert (made.stylise_steps, made.gpb, made.angle, made.texture_height) == (12, False, 15.0, 96)
-    assert made.stylise_geometry and made.depth_ratio == 2.0 and made.object_backdrop
+    assert made.stylise_geometry == "on" and made.depth_ratio == 2.0 and made.object_backdrop
     assert made.background == (0.0, 0.5, 1.0) and made.resolution == 384
     preset, config = transfer_run.config_overrides(fresh.context, {"preset": "preview", "angle": -30.0})
     assert preset == "preview" and config == {"angle": -30.0}  # a script's preset is that preset exactly

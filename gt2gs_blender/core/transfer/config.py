@@ -17,8 +17,10 @@ MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
 the farthest group's texture stays half the nearest's size (128 px at the default height), not a smudge."""
 FORWARD_SPREAD_DEG = 45.0
-"""Lay Out Texture's automatic projection is View when every view looks within this angle of the views' mean
-direction (a capture seen from the front), else Box."""
+"""Lay Out Texture's automatic projection is View, and Texture Moves Splats is on, when every view looks
+within this angle of the views' mean direction (a capture seen from the front); else Box, and off."""
+SWITCH = ("auto", "on", "off")
+"""The choices of a setting whose automatic value depends on the scene's views."""
 
 PARTS = {
     "views": "Views",
@@ -277,12 +279,15 @@ class TransferConfig:
         "does not trace its outline; the texture comes out weaker",
         "stylise",
     )
-    stylise_geometry: bool = setting(
-        False,
+    stylise_geometry: str = setting(
+        "auto",
         "Texture Moves Splats",
-        "Let the texture loss move, scale and turn the splats too, as the paper's code "
-        "does: bolder texture, looser shape",
+        "Let the texture loss move, scale and turn the splats too, as the paper's code does: bolder texture, "
+        "looser shape. Auto: on for a capture seen from the front (every view within "
+        f"{FORWARD_SPREAD_DEG:g}° of the views' mean direction), where near and far surfaces would carry "
+        "the texture twice; off for an object seen from all sides, which keeps its outline",
         "stylise",
+        choices=SWITCH,
     )
     densify: bool = setting(True, "Densify", "Add splats where the texture needs detail", "stylise")
     densify_every: int = setting(
@@ -521,7 +526,7 @@ class TransferConfig:
             raise ValueError(f"split_budget must be >= 1 (a multiple of the object's splats), got {self.split_budget}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
-        for name in ("device", "features", "backend"):
+        for name in ("device", "features", "backend", "stylise_geometry"):
             choices = SETTINGS[name].choices
             if getattr(self, name) not in choices:
                 raise ValueError(f"{name} must be one of {', '.join(choices)}, got {getattr(self, name)!r}")

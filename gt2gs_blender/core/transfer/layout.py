@@ -42,7 +42,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..cameras.camera import Camera
+from ..cameras.camera import Camera, seen_from_front
 from ..cameras.warp import backproject, expected_depth, reproject
 from ..errors import GT2GSError
 from ..features.specs import RENDER_SCALE
@@ -132,12 +132,7 @@ def projection(cameras: Sequence[Camera], choice: str) -> str:
         raise ValueError(f"layout_projection must be one of {', '.join(PROJECTIONS)}, got {choice!r}")
     if choice != "auto":
         return choice
-    forwards = np.stack([c.world_to_cam[2, :3] for c in cameras])
-    mean = forwards.sum(axis=0)
-    if np.linalg.norm(mean) < 1e-9:
-        return "box"
-    spread = forwards @ (mean / np.linalg.norm(mean))
-    return "view" if float(spread.min()) >= math.cos(math.radians(FORWARD_SPREAD_DEG)) else "box"
+    return "view" if seen_from_front(cameras, FORWARD_SPREAD_DEG) else "box"
 
 
 def _projector(views: ViewSet, config: TransferConfig) -> Projector:

@@ -26,7 +26,7 @@ PAPER_SCHEDULE: dict[str, Any] = dict(
     lambda_scale=0.1,
     scale_ratio_limit=1.0,
     scale_ratio_from_start=False,
-    stylise_geometry=True,  # the authors' stylise phases step every parameter, geometry included
+    stylise_geometry="on",  # the authors' stylise phases step every parameter, geometry included
     plateau_window=0,  # the paper's step counts, run in full
     match_channels=0,  # and its matching on every channel
 )

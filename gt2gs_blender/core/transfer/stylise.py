@@ -1,8 +1,10 @@
 """The optimisation of a texture transfer: stylise phases (GT² loss, AFCM) alternating with the
 Geometry Preservation Branch's correction phases, with densification early on (paper §3.2-3.4).
 
-Stylise phase: the DC colours learn (with ``stylise_geometry``, as in the authors' code, the geometry
-too, under the texture loss and the scale regulariser). Views are visited in the GT² order; each view's feature
+Stylise phase: the DC colours learn (with ``stylise_geometry`` on, as in the authors' code, the geometry
+too, under the texture loss and the scale regulariser; ``auto`` turns it on for a capture seen from the
+front, where the laid-out texture reaches near and far surfaces alike and only moved splats stop it
+showing twice from the other views). Views are visited in the GT² order; each view's feature
 cells get targets from the texture bank guided by the prior angles carried from the previous view
 (the first view uses the start angle), weighted per cell by the AFCM map; plus content and TV terms.
 With ``object_backdrop`` the stylise renders show the object over its own mean colour: over the
@@ -26,7 +28,7 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..cameras.camera import Camera, camera_extent
+from ..cameras.camera import Camera, camera_extent, seen_from_front
 from ..features.extractor import FeatureExtractor
 from ..render import render
 from ..scene.gaussians import GaussianScene
@@ -34,7 +36,7 @@ from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
 from ..train.optim import GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
-from .config import TransferConfig
+from .config import FORWARD_SPREAD_DEG, TransferConfig
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
 from .losses import anisotropy, content_loss, cosine_distance, layout_loss, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
@@ -74,8 +76,15 @@ class StyliseStats:
     stylise_steps: int = 0
     correct_steps: int = 0
     skipped_steps: int = 0
+    moved_splats: bool = False  # whether the stylise phases moved the geometry (Texture Moves Splats)
     densified: list[dict] = field(default_factory=list)
     plateau_skipped: dict[str, int] = field(default_factory=dict)  # steps left out at a loss plateau, per phase
+
+
+def moves_splats(cameras: list[Camera], choice: str) -> bool:
+    """Whether the stylise phases move the splats: ``on``, ``off``, or ``auto``: for a capture seen from the
+    front (``FORWARD_SPREAD_DEG``), not for an object seen from all sides, whose outline it would loosen."""
+    return choice == "on" or (choice == "auto" and seen_from_front(cameras, FORWARD_SPREAD_DEG))
 
 
 def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:
@@ -139,7 +148,7 @@ class Styliser:
         self.angle_maps: dict[int, torch.Tensor] = {}
         self.cursor = 0
         self.generator = torch.Generator().manual_seed(config.seed)
-        self.report = StyliseStats()
+        self.report = StyliseStats(moved_splats=moves_splats([v.camera for v in views], config.stylise_geometry))
 
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
@@ -186,7 +195,7 @@ class Styliser:
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
-        self.opt.set_trainable(self.colors + GEOMETRY if cfg.stylise_geometry else self.colors)
+        self.opt.set_trainable(self.colors + GEOMETRY if self.report.moved_splats else self.colors)
         out = render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
@@ -200,7 +209,7 @@ class Styliser:
         )
         if view.layout_image is not None:
             loss = loss + cfg.lambda_layout * layout_loss(image, view.layout_image)
-        if cfg.stylise_geometry:
+        if self.report.moved_splats:
             loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
         if densify:
