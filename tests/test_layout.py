@@ -288,6 +288,26 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     assert np.abs(preview.image.astype(np.float32) - expected).max() <= 1.0
 
 
+def test_a_region_s_preview_is_the_region_run_s_starting_point(shared, tmp_path):
+    """With only the wall's left half selected, the preview lays the texture on that half, sized on it, as
+    the run does: the same picture as a zero-step run with that region, the right half still grey."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+
+    scene, cam = wall(n=80), front_camera(96)
+    region = scene.means[:, 0] < -0.05
+    texture = stripes(period=32, size=128)
+    config = zero_step_config(shared, tmp_path, texture_repeats=3.0, angle=30.0)
+    started = transfer(scene, texture, [cam], config, region=region).scene
+    expected = render(started, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    shown = preview(scene, texture, [cam], config, size=96, region=region)
+    whole = preview(scene, texture, [cam], config, size=96)
+    assert shown.splats == len(started) < whole.splats
+    assert np.abs(shown.image.astype(np.float32) - expected).max() <= 1.0
+    right = shown.image[20:-20, 60:-20].astype(np.float32)
+    assert np.abs(right - 0.5 * 255).max() <= 2.0 and whole.image[20:-20, 60:-20].std() > 20
+
+
 def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
     """A run with no steps is its preview (preview_ssim ~1); a flat grey picture of the same view is not."""
     from gt2gs_blender.core.api import transfer

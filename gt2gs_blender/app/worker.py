@@ -150,23 +150,22 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
 
 
 def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
-    """Render the preview of the first view (what the run will lay on the scene) as a PNG."""
-    from ..core.cameras.generate import auto_views
+    """Render the preview of the first view (what the run will lay on the scene, or on its region) as a PNG."""
     from ..core.scene.files import read_scene
     from ..core.transfer.orientation_preview import preview
+    from ..core.transfer.region import region_mask
+    from ..core.transfer.views import fit_cameras
     from .images import write_png
-    from .jobs import read_texture
+    from .jobs import load_region, read_texture
 
     scene = read_scene(spec.input)
     config = _config(spec)
-    views = _views(spec)
+    loaded = None if spec.region is None else load_region(spec.region, len(scene))
+    region = region_mask(loaded, len(scene), scene.device)
     _prepare_kernel(config, lambda p: _send(events, p), cancel)
-    cameras = (
-        views
-        if isinstance(views, list)
-        else auto_views(scene, views or config.n_views, width=config.resolution, height=config.resolution)
-    )
-    shown = preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size)
+    framed = scene if region is None else scene.subset(region)  # the views the run fits, as it fits them
+    cameras = fit_cameras(framed, _views(spec), config.resolution, config.n_views)
+    shown = preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size, region=region)
     write_png(spec.output, shown.image)
     events("done", output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
 

@@ -324,7 +324,7 @@ class TransferRun:
                 "input_name": f"object {obj.name!r}",
                 "views_name": views_label(settings),
             }
-            if kind == "transfer" and settings.region_only:
+            if settings.region_only:  # the preview lays the texture on the region as the run will
                 np.save(job.path("region.npy"), selected_points(obj))
                 spec["region"] = "region.npy"
             job.start(spec)

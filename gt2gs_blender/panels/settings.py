@@ -115,7 +115,10 @@ FRONT_END = {
         ),
     ),
     "region_only": BoolProperty(
-        name="Selected Points Only", default=False, description="Restyle only the points selected in Edit Mode"
+        name="Selected Points Only",
+        default=False,
+        description="Restyle only the points selected in Edit Mode",
+        update=_layout_changed,
     ),
 }
 """Properties of the Blender front end that are not transfer settings."""

@@ -635,7 +635,8 @@ def test_first_compile_of_the_kernel_is_a_progress_stage(monkeypatch):
 
 def test_orientation_preview_names_the_first_view_and_the_result_s_size(blob):
     """The caption names the view the angle is measured in, and how many splats the run will save: the
-    layout's detail split (on in the preset) makes more than the object has, within Split Budget."""
+    layout's detail split (on in the preset) makes more than the object has, within Split Budget, and with
+    Selected Points Only fewer, since only the selection splits."""
     assert bpy.ops.gt2gs.preview_orientation(n_views=2) == {"FINISHED"}
     assert transfer_run.preview_caption() == (
         "First view: automatic view 1, in front (Blender's Front view, from -Y), 20° above; "
@@ -649,6 +650,12 @@ def test_orientation_preview_names_the_first_view_and_the_result_s_size(blob):
     start, ratio, count = int(found[1].replace(",", "")), float(found[2]), int(found[3].replace(",", ""))
     assert count == len(blob.data.points) < start <= bpy.context.scene.gt2gs.split_budget * count
     assert ratio == pytest.approx(start / count, abs=0.05)
+    selection = blob.data.attributes.new(transfer_run.SELECTION_ATTRIBUTE, "BOOLEAN", "POINT")
+    selection.data.foreach_set("value", np.arange(count) % 3 == 0)
+    bpy.context.scene.gt2gs.region_only = True  # the preview splits only the selected third, as the run will
+    assert bpy.ops.gt2gs.preview_orientation(n_views=2) == {"FINISHED"}
+    region_start = int(re.search(r"about ([\d,]+) splats", transfer_run.preview_splats_text())[1].replace(",", ""))
+    assert count < region_start < start
     scene = bpy.context.scene
     for name in ("B cam", "A cam"):
         scene.collection.objects.link(bpy.data.objects.new(name, bpy.data.cameras.new(name)))

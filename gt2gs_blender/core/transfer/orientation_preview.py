@@ -31,6 +31,7 @@ from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
 from .layout import LayoutFrame, lay_out, layout_frame, layout_shading, texture_height_for
 from .metrics import LUMA
+from .region import region_mask
 from .shade import shading
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
@@ -117,26 +118,31 @@ def layout_preview(
     config: TransferConfig,
     *,
     size: int = 256,
+    region: torch.Tensor | np.ndarray | None = None,
 ) -> Preview:
     """The first of ``cameras`` showing the scene with the texture laid out exactly as a run with ``config``
-    (``layout`` on) lays it, split to its detail, without the optimisation's changes."""
+    (``layout`` on) and ``region`` lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
-    views, frame = _run_frame(scene, cameras, config)
-    shade = layout_shading(scene, None, frame, config)
-    laid = lay_out(scene.detach(), None, views, image, frame, config, shade)
+    selected = region_mask(region, len(scene), scene.device)
+    views, frame = _run_frame(scene, cameras, config, selected)
+    shade = layout_shading(scene, selected, frame, config)
+    laid = lay_out(scene.detach(), selected, views, image, frame, config, shade)
     if config.split_size > 0:
-        laid, _ = add_detail(laid, laid.base_colors, None, views, image, frame, config, shade)
+        laid, _ = add_detail(laid, laid.base_colors, selected, views, image, frame, config, shade)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=views.background, backend=config.backend)
     return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
 
 
-def _run_frame(scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig) -> tuple[ViewSet, LayoutFrame]:
-    """The run's views of ``scene`` (``cameras`` at the run's resolution) and the layout frame they give."""
+def _run_frame(
+    scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig, selected: torch.Tensor | None
+) -> tuple[ViewSet, LayoutFrame]:
+    """The run's views of ``scene`` (``cameras`` at the run's resolution) and the layout frame they give,
+    sized on the ``selected`` splats (None: all) as the run sizes it."""
     background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
     run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
     views = render_views(scene.detach(), run_cameras, background, config.backend)
-    return views, layout_frame(scene, views, config)
+    return views, layout_frame(scene if selected is None else scene.subset(selected), views, config)
 
 
 @torch.no_grad()
@@ -147,14 +153,16 @@ def preview(
     config: TransferConfig,
     *,
     size: int = 256,
+    region: torch.Tensor | np.ndarray | None = None,
 ) -> Preview:
-    """The first of ``cameras`` (the run's views): what a run with ``config`` will lay on ``scene``; with
-    ``texture_repeats`` set, the sketch takes the texture size the run derives from it."""
+    """The first of ``cameras`` (the run's views): what a run with ``config`` will lay on ``scene`` (on its
+    ``region`` only, when given); with ``texture_repeats`` set, the sketch takes the texture size the run
+    derives from it."""
     if config.layout:
-        return layout_preview(scene, texture, cameras, config, size=size)
+        return layout_preview(scene, texture, cameras, config, size=size, region=region)
     height = config.texture_height
     if config.texture_repeats > 0:
-        views, frame = _run_frame(scene, cameras, config)
+        views, frame = _run_frame(scene, cameras, config, region_mask(region, len(scene), scene.device))
         height = texture_height_for(frame, views, config.n_scales)
     image = orientation_preview(
         scene,

@@ -253,7 +253,9 @@ def _transfer(
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
         metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
-        shown = preview(original, image, cameras, asked, size=max(cameras[0].width, cameras[0].height)).image
+        shown = preview(
+            original, image, cameras, asked, size=max(cameras[0].width, cameras[0].height), region=selected
+        ).image
         metrics["preview_ssim"] = preview_ssim(work, shown, cameras[0], background, config.backend)
     tracker.end()
     report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
