@@ -202,8 +202,10 @@ def test_the_view_projection_shows_the_texture_as_the_first_view_does(tilt):
 
 
 def test_auto_projection_throws_from_the_view_for_captures_and_boxes_orbits():
-    """``auto``: cameras that all look the same way (a capture) take the view projection, a ring the box."""
+    """``auto``: cameras that all look the same way (a capture) take the view projection, a ring the box; no
+    views, or views that cancel out, are no capture."""
     from gt2gs_blender.core.cameras.generate import look_at
+    from gt2gs_blender.core.cameras.spread import seen_from_front
     from gt2gs_blender.core.transfer.layout import projection
 
     UP = (0.0, 1.0, 0.0)
@@ -218,6 +220,7 @@ def test_auto_projection_throws_from_the_view_for_captures_and_boxes_orbits():
     assert projection(ring, "view") == "view" and projection(capture, "box") == "box"
     with pytest.raises(ValueError, match="layout_projection"):
         projection(ring, "sphere")
+    assert not seen_from_front(np.zeros((0, 3)), 45.0) and not seen_from_front(np.array([[0, 0, 1], [0, 0, -1]]), 45.0)
 
 
 def test_texture_height_matches_the_repeat_on_screen():

@@ -11,11 +11,17 @@ scene's render resolution. ``add_camera`` makes the Blender camera that sees wha
 
 from __future__ import annotations
 
+import json
 import math
+import os
 from collections.abc import Iterable
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
+
+from ..core.cameras.spread import seen_from_front
+from ..core.transfer.config import FORWARD_SPREAD_DEG
 
 BLENDER_TO_CV = np.diag([1.0, -1.0, -1.0])
 SENSOR_WIDTH_MM = 36.0
@@ -121,3 +127,39 @@ def add_camera(view: Any, collection: Any, name: str | None = None) -> Any:
     obj.matrix_world = mathutils.Matrix(camera_matrix(view.world_to_cam).tolist())
     collection.objects.link(obj)
     return obj
+
+
+def views_from_front(settings, scene) -> bool | None:
+    """Whether the views a run will take (``settings.view_source``) all look at the scene from one side, what
+    the automatic Projection and Texture Moves Splats follow; None while there are no views to tell."""
+    if settings.view_source == "AUTO":
+        return settings.n_views == 1  # automatic views ring the object; one alone looks from one side
+    if settings.view_source == "CAMERAS_JSON":
+        return _file_from_front(os.path.abspath(settings.cameras_json), _mtime(settings.cameras_json))
+    collection = settings.camera_collection if settings.view_source == "COLLECTION" else None
+    if settings.view_source == "COLLECTION" and collection is None:
+        return None
+    objects = collection.all_objects if collection is not None else scene.objects
+    forwards = [-np.array(o.matrix_world)[:3, 2] for o in objects if o.type == "CAMERA"]  # Blender looks down -z
+    return seen_from_front(np.array(forwards), FORWARD_SPREAD_DEG) if forwards else None
+
+
+def _mtime(path: str) -> float | None:
+    try:
+        return os.path.getmtime(path)
+    except OSError:
+        return None
+
+
+@lru_cache(maxsize=4)
+def _file_from_front(path: str, mtime: float | None) -> bool | None:
+    """:func:`views_from_front` for a cameras.json (read once per change; None when it cannot be read)."""
+    if mtime is None:
+        return None
+    try:
+        with open(path, encoding="utf-8") as f:
+            entries = json.load(f)
+        forwards = np.array([np.asarray(e["rotation"], np.float64)[:, 2] for e in entries])  # OpenCV: +z looks
+    except (OSError, ValueError, TypeError, KeyError, IndexError):
+        return None
+    return seen_from_front(forwards, FORWARD_SPREAD_DEG) if len(forwards) and np.isfinite(forwards).all() else None

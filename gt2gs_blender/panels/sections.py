@@ -3,8 +3,8 @@
 ``SECTION_OF_PART`` is the one table from the settings' parts (``core/transfer/config.py``, which the
 command line groups by) to these sub-panels; a new setting shows in its part's sub-panel by itself, and
 a part the table does not know shows under Advanced. Each sub-panel draws its own front-end settings
-first, then every scene setting of its parts. Where a setting's 0 means "automatic", the value a run
-will actually use is shown under it (``effective_text``). ``draw`` only lays out what functions return.
+first, then every scene setting of its parts. Where a setting's 0 (or ``auto``) means "automatic", the value
+a run will actually use is shown under it (``effective_text``). ``draw`` only lays out what functions return.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from typing import Any
 
 import bpy
 
-from ..blender import machine, textures, transfer_run
+from ..blender import machine, textures, transfer_run, views
 from ..core.transfer.config import IN_SCENE, MAX_DEPTH_RATIO, PARTS, SETTINGS, user_settings
 from .sidebar import CATEGORY
 
@@ -48,6 +48,11 @@ AUTOMATIC: dict[str, Callable[[dict[str, Any]], str]] = {
     "threads": lambda info: f"{info['threads']} (one per physical core)" if "threads" in info else "one per core",
 }
 """What a run uses for each setting whose 0 means automatic; a new such setting shows its help's words."""
+FROM_FRONT: dict[str, tuple[str, str]] = {
+    "layout_projection": ("View", "Box"),
+    "stylise_geometry": ("On", "Off"),
+}
+"""What the settings whose ``auto`` follows the views take when the views all look from the front, and not."""
 _ZERO_MEANS = re.compile(r"\b0(?: =|:) ([^;)]+)")
 
 
@@ -72,9 +77,16 @@ def section_settings(section: str) -> list[tuple[str, list[str]]]:
 
 
 def effective_text(name: str, value: Any, info: dict[str, Any] | None = None) -> str | None:
-    """What a run will use for setting ``name`` at ``value`` when that value means automatic (0), else None;
-    ``info``: what the machine check found (e.g. the thread count)."""
+    """What a run will use for setting ``name`` at ``value`` when that value means automatic (0, or ``auto``),
+    else None; ``info``: what the machine check found (e.g. the thread count) and ``front``, whether the
+    views all look from the front (None: no views yet)."""
     meta = SETTINGS.get(name)
+    if name in FROM_FRONT and value == "auto":
+        front = (info or {}).get("front")
+        if front is None:
+            return None
+        on, off = FROM_FRONT[name]
+        return f"Uses {on}: the views all look from the front" if front else f"Uses {off}: the views surround it"
     if meta is None or isinstance(value, bool) or value != 0:
         return None
     if name in AUTOMATIC:
@@ -167,7 +179,7 @@ def section_panel(section: str) -> type:
         layout.use_property_decorate = False
         if front is not None:
             front(layout, context)
-        info = machine.current().info
+        info = {**(machine.current().info or {}), "front": views.views_from_front(context.scene.gt2gs, context.scene)}
         for part, names in groups:
             column = layout.column()
             if front is not None or len(groups) > 1:

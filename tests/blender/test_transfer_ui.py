@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import glob
+import json
 import math
 import os
 import re
@@ -523,6 +524,50 @@ def test_automatic_settings_show_the_value_a_run_uses():
     assert effective_text("plateau_window", 0) == "Uses every step of every phase"
     assert effective_text("dedup_threshold", 0.0) == "Uses every texture bank entry kept"
     assert effective_text("gpb", False) is None and effective_text("seed", 0) is None  # 0 is a value there
+    assert effective_text("stylise_geometry", "auto", {"front": True}) == "Uses On: the views all look from the front"
+    assert effective_text("layout_projection", "auto", {"front": False}) == "Uses Box: the views surround it"
+    assert effective_text("stylise_geometry", "auto", {"front": None}) is None  # no views to tell yet
+    assert effective_text("stylise_geometry", "off", {"front": True}) is None
+
+
+def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
+    """What the automatic Projection and Texture Moves Splats follow, from each source of views: automatic
+    views ring the object; scene cameras and a cameras.json count by where they look."""
+    from mathutils import Euler
+
+    from gt2gs_blender.blender.views import views_from_front
+
+    scene = fresh.context.scene
+    settings = scene.gt2gs
+    settings.view_source, settings.n_views = "AUTO", 16
+    assert views_from_front(settings, scene) is False
+    settings.n_views = 1
+    assert views_from_front(settings, scene) is True
+    settings.view_source = "SCENE_CAMERAS"
+    assert views_from_front(settings, scene) is None  # no camera yet
+    for name, x, turn in (("left", -1.0, 10.0), ("right", 1.0, -10.0)):
+        camera = fresh.data.objects.new(name, fresh.data.cameras.new(name))
+        camera.location = (x, -5.0, 0.0)
+        camera.rotation_euler = Euler((math.radians(90.0), 0.0, math.radians(turn)))  # looking along +y
+        scene.collection.objects.link(camera)
+    fresh.context.view_layer.update()
+    assert views_from_front(settings, scene) is True  # a capture seen from the front
+    behind = fresh.data.objects.new("behind", fresh.data.cameras.new("behind"))
+    behind.location, behind.rotation_euler = (0.0, 5.0, 0.0), Euler((math.radians(90.0), 0.0, math.radians(180.0)))
+    scene.collection.objects.link(behind)
+    fresh.context.view_layer.update()
+    assert views_from_front(settings, scene) is False  # one looks back: an orbit
+    path = tmp_path / "cameras.json"
+    forward = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]  # OpenCV camera-to-world: looks along +z
+    back = [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]]
+    path.write_text(json.dumps([{"rotation": forward}, {"rotation": forward}]), encoding="utf-8")
+    settings.view_source, settings.cameras_json = "CAMERAS_JSON", str(path)
+    assert views_from_front(settings, scene) is True
+    path.write_text(json.dumps([{"rotation": forward}, {"rotation": back}]), encoding="utf-8")
+    os.utime(path, (1e9, 1e9))  # a new modification time: read again
+    assert views_from_front(settings, scene) is False
+    settings.cameras_json = str(tmp_path / "missing.json")
+    assert views_from_front(settings, scene) is None
 
 
 def test_settings_a_run_ignores_are_greyed_out(fresh):

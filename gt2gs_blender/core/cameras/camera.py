@@ -198,14 +198,3 @@ def camera_extent(cameras: Sequence[Camera]) -> float:
     """3DGS's scene extent: 1.1 x the largest distance of a camera centre from their mean."""
     centers = np.stack([c.center for c in cameras])
     return 1.1 * float(np.linalg.norm(centers - centers.mean(axis=0), axis=1).max())
-
-
-def seen_from_front(cameras: Sequence[Camera], max_deg: float) -> bool:
-    """Whether every camera looks within ``max_deg`` of the cameras' mean direction (a capture seen from
-    the front, as LLFF's are), not around an object; cameras looking every way round say no."""
-    forwards = np.stack([c.world_to_cam[2, :3] for c in cameras])
-    mean = forwards.sum(axis=0)
-    if np.linalg.norm(mean) < 1e-9:
-        return False
-    spread = forwards @ (mean / np.linalg.norm(mean))
-    return float(spread.min()) >= math.cos(math.radians(max_deg))

@@ -42,7 +42,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..cameras.camera import Camera, seen_from_front
+from ..cameras.camera import Camera
+from ..cameras.spread import cameras_from_front
 from ..cameras.warp import backproject, expected_depth, reproject
 from ..errors import GT2GSError
 from ..features.specs import RENDER_SCALE
@@ -132,7 +133,7 @@ def projection(cameras: Sequence[Camera], choice: str) -> str:
         raise ValueError(f"layout_projection must be one of {', '.join(PROJECTIONS)}, got {choice!r}")
     if choice != "auto":
         return choice
-    return "view" if seen_from_front(cameras, FORWARD_SPREAD_DEG) else "box"
+    return "view" if cameras_from_front(cameras, FORWARD_SPREAD_DEG) else "box"
 
 
 def _projector(views: ViewSet, config: TransferConfig) -> Projector:

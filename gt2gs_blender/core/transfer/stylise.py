@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 
 import torch
 
-from ..cameras.camera import Camera, camera_extent, seen_from_front
+from ..cameras.camera import Camera, camera_extent
+from ..cameras.spread import cameras_from_front
 from ..features.extractor import FeatureExtractor
 from ..render import render
 from ..scene.gaussians import GaussianScene
@@ -84,7 +85,7 @@ class StyliseStats:
 def moves_splats(cameras: list[Camera], choice: str) -> bool:
     """Whether the stylise phases move the splats: ``on``, ``off``, or ``auto``: for a capture seen from the
     front (``FORWARD_SPREAD_DEG``), not for an object seen from all sides, whose outline it would loosen."""
-    return choice == "on" or (choice == "auto" and seen_from_front(cameras, FORWARD_SPREAD_DEG))
+    return choice == "on" or (choice == "auto" and cameras_from_front(cameras, FORWARD_SPREAD_DEG))
 
 
 def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:
