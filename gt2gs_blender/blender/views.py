@@ -135,7 +135,10 @@ def views_from_front(settings, scene) -> bool | None:
     if settings.view_source == "AUTO":
         return settings.n_views == 1  # automatic views ring the object; one alone looks from one side
     if settings.view_source == "CAMERAS_JSON":
-        return _file_from_front(os.path.abspath(settings.cameras_json), _mtime(settings.cameras_json))
+        import bpy
+
+        path = os.path.abspath(bpy.path.abspath(settings.cameras_json))  # "//" is the .blend's folder
+        return _file_from_front(path, _mtime(path))
     collection = settings.camera_collection if settings.view_source == "COLLECTION" else None
     if settings.view_source == "COLLECTION" and collection is None:
         return None
