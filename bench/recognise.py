@@ -252,7 +252,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 continue
             t0 = time.perf_counter()
             variant = references[preset_name]
-            views = held_out_renders(layout_start(run, texture_path(texture)), bench)
+            views = held_out_renders(layout_start(run, bench, texture_path(texture)), bench)
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
             p["content_ssim"] = content_ssim(views, original_views)

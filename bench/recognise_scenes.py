@@ -31,18 +31,14 @@ import torch
 
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
-from gt2gs_blender.core.scene.gaussians import concat
 from gt2gs_blender.core.transfer.content import content_and_hidden
-from gt2gs_blender.core.transfer.detail import add_detail
 from gt2gs_blender.core.transfer.layout import (
     LayoutFrame,
-    lay_out,
     layout_frame,
     layout_images,
-    layout_shading,
     texture_height_for,
 )
-from gt2gs_blender.core.transfer.region import stylise_start
+from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.texture import load_texture
 from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras, render_views
 
@@ -109,8 +105,6 @@ class RunStart:
     stage, from the engine's own pieces): the views it optimises, its hidden splats, the layout's frame."""
 
     config: TransferConfig
-    start: GaussianScene
-    """The scene stylisation starts from (SH at the result's degree), hidden splats included."""
     content: ViewSet | None
     hidden: torch.Tensor | None
     frame: LayoutFrame | None
@@ -123,29 +117,20 @@ def run_start(bench: BenchScene, config: TransferConfig) -> RunStart:
     colours); the views are rendered only when the layout or ``texture_repeats`` needs them."""
     original = bench.scene.detach()
     if not (config.layout or config.texture_repeats > 0):
-        return RunStart(config, original, None, None, None, config.texture_height)
+        return RunStart(config, None, None, None, config.texture_height)
     cameras = fit_cameras(original, bench.transfer_views, config.resolution, config.n_views)
     background = torch.tensor(config.background, dtype=original.dtype)
     content, hidden = content_and_hidden(original, cameras, background, config)
     frame = layout_frame(original, content, config)
     height = texture_height_for(frame, content, config.n_scales) if config.texture_repeats > 0 else None
-    start = stylise_start(original, None, config.stylised_sh_degree)
-    return RunStart(config, start, content, hidden, frame, height or config.texture_height)
+    return RunStart(config, content, hidden, frame, height or config.texture_height)
 
 
-@torch.no_grad()
-def layout_start(run: RunStart, texture: Path) -> GaussianScene:
+def layout_start(run: RunStart, bench: BenchScene, texture: Path) -> GaussianScene:
     """The layout a run with ``layout`` on lays, without the optimisation's changes: the texture on the
     splats the run restyles, split to its detail (hidden ones keep their colours, as the result keeps them)."""
     assert run.content is not None and run.frame is not None and run.config.layout
-    hidden = run.hidden
-    work = run.start if hidden is None else run.start.subset(~hidden)
-    image = load_texture(texture)
-    shade = layout_shading(work, None, run.frame, run.config)
-    laid = lay_out(work, None, run.content, image, run.frame, run.config, shade)
-    if run.config.split_size > 0:
-        laid, _ = add_detail(laid, laid.base_colors, None, run.content, image, run.frame, run.config, shade)
-    return laid if hidden is None else concat([run.start.subset(hidden), laid])
+    return laid_out_start(bench.scene, load_texture(texture), run.content, run.hidden, run.frame, run.config)
 
 
 @torch.no_grad()

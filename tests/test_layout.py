@@ -311,6 +311,33 @@ def test_a_region_s_preview_is_the_region_run_s_starting_point(shared, tmp_path)
     assert np.abs(right - 0.5 * 255).max() <= 2.0 and whole.image[20:-20, 60:-20].std() > 20
 
 
+def test_the_preview_skips_the_splats_the_run_skips(shared, tmp_path):
+    """Behind the wall, a coarse wall no view sees: the run leaves its splats as they are (not laid out, not
+    split), and the preview counts and shows the same scene as a zero-step run, not a split of them too."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.scene.gaussians import concat
+    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+
+    front, cam = wall(n=80), front_camera(96)
+    behind = GaussianScene.from_activated(
+        wall(n=6).means * torch.tensor([0.6, 0.6, 4.0 / 3.0]),
+        torch.tensor([0.15, 0.15, 1e-3]).expand(36, 3),
+        torch.full((36,), 0.99),
+        torch.full((36, 3), 0.2),
+    )
+    scene = concat([front, behind])
+    texture = stripes(period=32, size=128)
+    config = wall_config(shared, tmp_path, stylise_steps=0, correct_steps=0, texture_repeats=3.0, color_transfer=False)
+    result = transfer(scene, texture, [cam], config)
+    assert result.report["skips"]["hidden"] >= len(behind)  # and the front splats other splats cover
+    kept = (result.scene.means[:, 2] > 3.5).nonzero().squeeze(1)
+    assert torch.equal(result.scene.subset(kept).means, behind.means)  # not split
+    expected = render(result.scene, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    preview = layout_preview(scene, texture, [cam], config, size=96)
+    assert preview.splats == len(result.scene)
+    assert np.abs(preview.image.astype(np.float32) - expected).max() <= 1.0
+
+
 def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
     """A run with no steps is its preview (preview_ssim ~1); a flat grey picture of the same view is not."""
     from gt2gs_blender.core.api import transfer

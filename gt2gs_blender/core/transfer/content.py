@@ -82,10 +82,12 @@ HIDDEN_CAMERAS_PER_CALL = 4
 """Cameras rendered together when measuring each Gaussian's contribution."""
 
 
+@torch.enable_grad()
 def contributions(scene: GaussianScene, cameras: Sequence[Camera], backend: str = "auto") -> torch.Tensor:
     """Per Gaussian (N,), its blending weight T*alpha summed over every pixel of every camera, in
     pixels: the gradient of the summed render of a zero colour probe, so exactly what compositing
-    gives it (0 for a Gaussian culled, too faint or behind opaque ones everywhere)."""
+    gives it (0 for a Gaussian culled, too faint or behind opaque ones everywhere; gradients on even
+    inside a caller's ``no_grad``, such as the preview's)."""
     probe = torch.zeros(len(scene), 1, dtype=scene.dtype, device=scene.device, requires_grad=True)
     geometry = scene.detach()
     start = 0

@@ -28,14 +28,15 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
+from .content import content_and_hidden
 from .detail import add_detail
 from .layout import LayoutFrame, lay_out, layout_frame, layout_shading, texture_height_for
 from .metrics import LUMA
-from .region import region_mask
+from .region import assemble, region_mask, stylise_start, visible_rows
 from .shade import shading
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
-from .views import ViewSet, render_views
+from .views import ViewSet
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -124,25 +125,46 @@ def layout_preview(
     (``layout`` on) and ``region`` lays it, split to its detail, without the optimisation's changes."""
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
     selected = region_mask(region, len(scene), scene.device)
-    views, frame = _run_frame(scene, cameras, config, selected)
-    shade = layout_shading(scene, selected, frame, config)
-    laid = lay_out(scene.detach(), selected, views, image, frame, config, shade)
-    if config.split_size > 0:
-        laid, _ = add_detail(laid, laid.base_colors, selected, views, image, frame, config, shade)
+    views, hidden, frame = _run_frame(scene, cameras, config, selected)
+    laid = laid_out_start(scene, image, views, hidden, frame, config, selected)
     cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
     out = render(laid, [cam], background=views.background, backend=config.backend)
     return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
 
 
+@torch.no_grad()
+def laid_out_start(
+    scene: GaussianScene,
+    texture: np.ndarray,
+    views: ViewSet,
+    hidden: torch.Tensor | None,
+    frame: LayoutFrame,
+    config: TransferConfig,
+    selected: torch.Tensor | None = None,
+) -> GaussianScene:
+    """``scene`` as a run with ``config`` (``layout`` on) starts its optimisation: the texture laid out on the
+    ``selected`` splats (all when None) that ``views`` see, split to the texture's detail (the run splits
+    before or after, into the same children); ``hidden`` splats keep their colours, as the run keeps them."""
+    start = stylise_start(scene.detach(), selected, config.stylised_sh_degree)
+    hidden, region = visible_rows(selected, hidden)
+    work = start if hidden is None else start.subset(~hidden)
+    shade = layout_shading(work, region, frame, config)
+    laid = lay_out(work, region, views, texture, frame, config, shade)
+    if config.split_size > 0:
+        laid, region = add_detail(laid, laid.base_colors, region, views, texture, frame, config, shade)
+    return assemble(laid, region, start, selected, hidden, changed=True)
+
+
 def _run_frame(
     scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig, selected: torch.Tensor | None
-) -> tuple[ViewSet, LayoutFrame]:
-    """The run's views of ``scene`` (``cameras`` at the run's resolution) and the layout frame they give,
-    sized on the ``selected`` splats (None: all) as the run sizes it."""
+) -> tuple[ViewSet, torch.Tensor | None, LayoutFrame]:
+    """The run's views of ``scene`` (``cameras`` at the run's resolution), the splats they all miss (None when
+    the run does not skip them) and the layout frame, sized on the ``selected`` splats (None: all) as the run
+    sizes it."""
     background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
     run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
-    views = render_views(scene.detach(), run_cameras, background, config.backend)
-    return views, layout_frame(scene if selected is None else scene.subset(selected), views, config)
+    views, hidden = content_and_hidden(scene.detach(), run_cameras, background, config)
+    return views, hidden, layout_frame(scene if selected is None else scene.subset(selected), views, config)
 
 
 @torch.no_grad()
@@ -162,7 +184,7 @@ def preview(
         return layout_preview(scene, texture, cameras, config, size=size, region=region)
     height = config.texture_height
     if config.texture_repeats > 0:
-        views, frame = _run_frame(scene, cameras, config, region_mask(region, len(scene), scene.device))
+        views, _, frame = _run_frame(scene, cameras, config, region_mask(region, len(scene), scene.device))
         height = texture_height_for(frame, views, config.n_scales)
     image = orientation_preview(
         scene,

@@ -32,7 +32,7 @@ from .gt2 import view_order
 from .layout import lay_out, layout_frame, layout_images, layout_shading, shade_width, texture_height_for
 from .metrics import preview_ssim
 from .orientation_preview import preview
-from .region import assemble, region_mask, structure_changed, stylise_start
+from .region import assemble, region_mask, structure_changed, stylise_start, visible_rows
 from .skips import Plateau, redundant_views
 from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture import load_texture
@@ -178,12 +178,9 @@ def _transfer(
     )
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     content, hidden = content_and_hidden(original, cameras, background, config)
-    start = work = stylise_start(original, selected, config.stylised_sh_degree)
-    if hidden is not None and selected is not None and not bool((selected & ~hidden).any()):
-        hidden = None  # the whole region is hidden: restyle it as asked
-    if hidden is not None:
-        work = work.subset(~hidden)
-    region = selected if selected is None or hidden is None else selected[~hidden]
+    start = stylise_start(original, selected, config.stylised_sh_degree)
+    hidden, region = visible_rows(selected, hidden)
+    work = start if hidden is None else start.subset(~hidden)
     frame = None
     if config.layout or config.texture_repeats > 0:
         # sized on every selected splat, hidden ones too, as the orientation preview sizes it

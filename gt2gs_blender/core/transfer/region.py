@@ -42,6 +42,16 @@ def assemble(
     return concat([*parts, work.subset(restyled)])
 
 
+def visible_rows(
+    selected: torch.Tensor | None, hidden: torch.Tensor | None
+) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """The hidden rows a run skips (None when none, or when every selected row is hidden: then it restyles
+    them as asked) and the region among the rest (None: all of them)."""
+    if hidden is not None and selected is not None and not bool((selected & ~hidden).any()):
+        hidden = None
+    return hidden, selected if selected is None or hidden is None else selected[~hidden]
+
+
 def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.device) -> torch.Tensor | None:
     """The region as a bool mask (n,) on ``device`` (from a mask or an index array); None = everything."""
     if region is None:
