@@ -66,6 +66,8 @@ from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
 SHARED = ROOT.parent / "shared"
 TEXTURES = SHARED / "data" / "textures"
 OUT = ROOT / "bench" / "out" / "recognise"
+HELD_OUT_SIZE = 256
+"""The held-out views' longest side the target is judged at (``--size`` measures at another)."""
 STRUCTURED = ("herringbone_wood", "brick_wall", "honeycomb", "toy_bricks", "woven_straw", "green_cells")
 MEASURES = ("gram", "gabor")
 TOP = 3
@@ -187,6 +189,11 @@ def write_sheet(path: Path, sheet: dict[str, list[np.ndarray]]) -> None:
     cv2.imwrite(str(path), cv2.cvtColor(np.vstack(rows), cv2.COLOR_RGB2BGR))
 
 
+def output_name(args: argparse.Namespace) -> str:
+    """The JSON, contact sheet and picture folder's name: the tag, with the size when not the default."""
+    return args.tag if args.size == HELD_OUT_SIZE else f"{args.tag}-{args.size}px"
+
+
 def ranks_label(r: dict, name: str) -> str:
     return f"{name} G{r['gram_rank']} B{r['gabor_rank']}"
 
@@ -196,7 +203,7 @@ def ranks_label(r: dict, name: str) -> str:
 # ---------------------------------------------------------------------------------------------------
 def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureStats]) -> tuple[list[dict], dict]:
     base_config = preset(args.presets[0], **args.overrides)
-    bench = load_bench_scene(name, 256)
+    bench = load_bench_scene(name, args.size)
     rows: list[dict] = []
     sheet: dict[str, list[np.ndarray]] = {}
 
@@ -217,7 +224,8 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     heights = list(
         dict.fromkeys([*args.projected_heights, *(r.texture_height for r in starts.values() if not r.config.layout)])
     )
-    folder = OUT / args.tag / name
+    folder = OUT / args.tag / name  # the results, whatever size measures them
+    pictures = OUT / output_name(args) / name
     for texture in args.textures:
         image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
         sheet[texture] = [tile(image, texture)]
@@ -258,9 +266,9 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             p["content_ssim"] = content_ssim(views, original_views)
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
-            folder.mkdir(parents=True, exist_ok=True)
+            pictures.mkdir(parents=True, exist_ok=True)
             for k, (rgb, _) in enumerate(views):
-                cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+                cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
             surface = variant.removesuffix("-start") + "-surface"
             views = layout_surface(run, bench, texture_path(texture))
             p = row(name, texture, surface, score(view_stats(views), stats))
@@ -329,9 +337,10 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 )
                 for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
                     sheet[texture].append(tile(rgb, ranks_label(t, f"{variant} v{k}") if k == 0 else f"{variant} v{k}"))
+                pictures.mkdir(parents=True, exist_ok=True)
                 for k, (rgb, _) in enumerate(views):
-                    cv2.imwrite(str(folder / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-    write_sheet(OUT / f"{args.tag}-{name}.png", sheet)
+                    cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    write_sheet(OUT / f"{output_name(args)}-{name}.png", sheet)
     return rows, {
         "held_out": [c.name for c in bench.held_out],
         "background": bench.background,
@@ -447,6 +456,13 @@ def main() -> None:
         action="store_true",
         help="with --reuse: also results saved before some of today's settings existed (listed in their rows)",
     )
+    parser.add_argument(
+        "--size",
+        type=int,
+        default=HELD_OUT_SIZE,
+        metavar="PX",
+        help=f"held-out views' longest side (default {HELD_OUT_SIZE}); other sizes write <tag>-<size>px outputs",
+    )
     parser.add_argument("--threads", type=int, default=0, help="torch CPU threads for the measure (0: torch's default)")
     args = parser.parse_args()
     args.overrides = parse_overrides(args.set)
@@ -477,8 +493,9 @@ def main() -> None:
         "load_average": os.getloadavg(),
     }
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / f"{args.tag}.json").write_text(json.dumps(report, indent=1, default=str))
-    print(f"wrote {OUT / (args.tag + '.json')} and contact sheets {OUT / args.tag}-<scene>.png")
+    out = output_name(args)
+    (OUT / f"{out}.json").write_text(json.dumps(report, indent=1, default=str))
+    print(f"wrote {OUT / (out + '.json')} and contact sheets {OUT / out}-<scene>.png")
 
 
 if __name__ == "__main__":
