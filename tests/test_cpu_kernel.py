@@ -95,3 +95,22 @@ def test_a_build_folder_without_its_done_marker_is_not_imported(tmp_path):
     """A library with no marker may be half written (a build still running or killed): it is rebuilt."""
     (tmp_path / f"{kernel_cache.NAME}{kernel_cache.LIB_EXT}").write_bytes(b"not a library")
     assert kernel_cache.import_built(tmp_path) is None
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 1000, 300_000])
+def test_depth_order_is_a_stable_argsort(kernel, n):
+    """The kernel's radix depth sort gives exactly torch's stable argsort: negative, zero (both signs),
+    infinite and tied depths included, ties in index order (what the tile lists' front-to-back order needs)."""
+    import torch
+
+    depths = torch.randn(n, generator=torch.Generator().manual_seed(n)) * 5.0
+    if n >= 1000:
+        depths[::7] = depths[3]  # ties
+        depths[1::97] = 0.0
+        depths[2::97] = -0.0
+        depths[5] = float("inf")
+        depths[6] = -float("inf")
+        depths[8::11] = depths[8::11] * 1e-30  # subnormal-range magnitudes of both signs
+    order = cpu_backend.depth_order(depths)
+    assert order.dtype == torch.int64
+    assert torch.equal(order, torch.argsort(depths, stable=True))

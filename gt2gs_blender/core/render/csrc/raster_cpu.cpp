@@ -91,6 +91,50 @@ void gather_tile(const T* means2d, const T* conics, const T* opacities, const Fo
 
 }  // namespace
 
+// Entry indices in ascending depth order, ties by index (a stable LSD radix sort of the float32 bits, 3 passes
+// of 11 bits: linear, ~8x faster than torch.argsort on 2 cores). Negative depths sort before positive ones
+// (the usual sign flip; -0 as +0), so any finite depth is ordered as a float comparison would.
+torch::Tensor depth_order(torch::Tensor depths) {
+  TORCH_CHECK(depths.dtype() == torch::kFloat32 && depths.is_contiguous() && depths.dim() == 1,
+              "depths must be a contiguous float32 (M,) tensor");
+  const int64_t m = depths.size(0);
+  TORCH_CHECK(m < INT32_MAX, "too many entries to sort");
+  const uint32_t* bits = reinterpret_cast<const uint32_t*>(depths.data_ptr<float>());
+  constexpr int kBits = 11, kPasses = 3;
+  constexpr uint32_t kBuckets = 1u << kBits, kMask = kBuckets - 1;
+  std::vector<uint32_t> keys(m), keys_tmp(m);
+  std::vector<int32_t> idx(m), idx_tmp(m);
+  std::vector<int64_t> count(kPasses * kBuckets, 0);
+  for (int64_t i = 0; i < m; ++i) {
+    const uint32_t b = bits[i] == 0x80000000u ? 0u : bits[i];  // -0 sorts as +0
+    const uint32_t k = (b & 0x80000000u) ? ~b : (b | 0x80000000u);
+    keys[i] = k;
+    idx[i] = static_cast<int32_t>(i);
+    for (int p = 0; p < kPasses; ++p) ++count[p * kBuckets + ((k >> (p * kBits)) & kMask)];
+  }
+  for (int p = 0; p < kPasses; ++p) {
+    int64_t* c = count.data() + p * kBuckets;
+    int64_t total = 0;
+    for (uint32_t d = 0; d < kBuckets; ++d) {
+      const int64_t n = c[d];
+      c[d] = total;
+      total += n;
+    }
+    const int shift = p * kBits;
+    for (int64_t i = 0; i < m; ++i) {
+      const int64_t slot = c[(keys[i] >> shift) & kMask]++;
+      keys_tmp[slot] = keys[i];
+      idx_tmp[slot] = idx[i];
+    }
+    keys.swap(keys_tmp);
+    idx.swap(idx_tmp);
+  }
+  auto order = torch::empty({m}, torch::dtype(torch::kInt64));
+  int64_t* out = order.data_ptr<int64_t>();
+  for (int64_t i = 0; i < m; ++i) out[i] = idx[i];
+  return order;
+}
+
 // Counting sort of (entry, tile) pairs by tile; entries are visited in the given depth order, so
 // each tile's list comes out sorted front to back. Returns (tile_offsets[n_tiles+1], pair_gauss[P]).
 std::vector<torch::Tensor> bin_tiles(torch::Tensor tile_bbox, torch::Tensor cam_ids, torch::Tensor depth_order,
@@ -484,6 +528,7 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor q
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "Project Gaussians into cameras");
   m.def("project_backward", &project_backward, "Gradients of project_forward()");
+  m.def("depth_order", &depth_order, "Entry indices front to back (stable radix sort of float32 depths)");
   m.def("bin_tiles", &bin_tiles, "Sort Gaussian/tile pairs by tile, front to back");
   m.def("forward", &forward, "Composite Gaussians over 8x8 tiles");
   m.def("backward", &backward, "Gradients of forward()");
