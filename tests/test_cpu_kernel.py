@@ -114,3 +114,25 @@ def test_depth_order_is_a_stable_argsort(kernel, n):
     order = cpu_backend.depth_order(depths)
     assert order.dtype == torch.int64
     assert torch.equal(order, torch.argsort(depths, stable=True))
+
+
+@pytest.mark.parametrize("n_cams", [1, 3])
+def test_tile_lists_equal_the_portable_binning(kernel, n_cams):
+    """The kernel's parallel counting sort gives the portable binning's tile lists exactly (offsets and
+    every tile's entries front to back), over enough entries that every thread sorts a run of them."""
+    import torch
+
+    from gt2gs_blender.core.render.binning import bin_entries_torch
+
+    g = torch.Generator().manual_seed(n_cams)
+    m, tiles_x, tiles_y = 60_000, 12, 9
+    x0, y0 = torch.randint(0, tiles_x, (m,), generator=g), torch.randint(0, tiles_y, (m,), generator=g)
+    x1 = (x0 + torch.randint(0, 4, (m,), generator=g)).clamp(max=tiles_x - 1)
+    y1 = (y0 + torch.randint(0, 3, (m,), generator=g)).clamp(max=tiles_y - 1)
+    bbox = torch.stack([x0, y0, x1, y1], 1).to(torch.int32).contiguous()
+    cams = torch.randint(0, n_cams, (m,), generator=g).to(torch.int32)
+    depths = torch.randperm(m, generator=g).float() * 1e-3 + 0.1  # distinct: the portable sort is not stable
+    offsets, pairs = kernel.bin_tiles(bbox, cams, cpu_backend.depth_order(depths), n_cams, tiles_x, tiles_y)
+    portable = bin_entries_torch(bbox, cams, depths, n_cams, tiles_x, tiles_y)
+    assert torch.equal(offsets, portable.offsets)
+    assert torch.equal(pairs, portable.pair_gauss)

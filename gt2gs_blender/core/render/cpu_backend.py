@@ -103,13 +103,13 @@ def composite(proj: Projection, n_cams: int, width: int, height: int) -> tuple[t
 
 
 class _Project(torch.autograd.Function):
-    """Dense C++ projection, compacted to the visible entries; gradients flow to the Gaussians."""
+    """C++ projection of the visible entries (compacted in the kernel); gradients flow to the Gaussians."""
 
     @staticmethod
     def forward(ctx, means, quats, scales, opacities, sh, viewmats, ks, width, height, near, far, sh_degree):
         kernel = load_kernel()
         sh_in = sh if sh_degree >= 0 else means.new_zeros(0)
-        means2d, conics, rgb, depth, radii, rects, valid = kernel.project_forward(
+        means2d, conics, rgb, depth, radii, rects, cam_ids, gauss_ids = kernel.project_forward(
             means.detach(),
             quats.detach(),
             scales.detach(),
@@ -123,20 +123,10 @@ class _Project(torch.autograd.Function):
             far,
             sh_degree,
         )
-        cam_ids, gauss_ids = valid.nonzero(as_tuple=True)
         ctx.save_for_backward(means, quats, scales, sh_in, viewmats, ks, cam_ids, gauss_ids)
         ctx.config = (width, height, sh_degree)
         ctx.mark_non_differentiable(cam_ids, gauss_ids, radii, rects)
-        return (
-            means2d[cam_ids, gauss_ids],
-            conics[cam_ids, gauss_ids],
-            rgb[cam_ids, gauss_ids],
-            depth[cam_ids, gauss_ids],
-            cam_ids,
-            gauss_ids,
-            radii[cam_ids, gauss_ids],
-            rects[cam_ids, gauss_ids],
-        )
+        return means2d, conics, rgb, depth, cam_ids, gauss_ids, radii, rects
 
     @staticmethod
     def backward(ctx, g_means2d, g_conics, g_rgb, g_depth, *_):

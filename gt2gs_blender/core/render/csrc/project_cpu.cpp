@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 namespace {
 
@@ -404,8 +405,28 @@ void project_backward_impl(const torch::Tensor& means, const torch::Tensor& quat
 
 }  // namespace
 
-// Dense per (camera, Gaussian) projection; returns means2d, conics, rgb (if sh_degree >= 0), depth,
-// radii, tile rectangles and the visibility mask, all (B, N, ...).
+namespace {
+
+// The rows of the dense (B*N, ...) `dense` at `rows` (ascending), as a new (M, ...) tensor, in parallel.
+torch::Tensor gather_rows(const torch::Tensor& dense, const std::vector<int64_t>& rows) {
+  const int64_t m = int64_t(rows.size()), width = dense.numel() / std::max<int64_t>(1, dense.size(0) * dense.size(1));
+  std::vector<int64_t> shape{m};
+  for (int64_t d = 2; d < dense.dim(); ++d) shape.push_back(dense.size(d));
+  auto out = torch::empty(shape, dense.options());
+  if (m == 0 || width == 0) return out;
+  const int64_t bytes = width * int64_t(dense.element_size());
+  const char* src = static_cast<const char*>(dense.data_ptr());
+  char* dst = static_cast<char*>(out.data_ptr());
+#pragma omp parallel for schedule(static) num_threads(std::max(1, at::get_num_threads()))
+  for (int64_t k = 0; k < m; ++k) std::memcpy(dst + k * bytes, src + rows[k] * bytes, size_t(bytes));
+  return out;
+}
+
+}  // namespace
+
+// Per (camera, Gaussian) projection, compacted to the visible entries (camera-major, then Gaussian index):
+// means2d, conics, rgb (if sh_degree >= 0), depth, radii, tile rectangles, then cam_ids and gauss_ids (int64).
+// The dense buffers are never zeroed: only the visible entries' rows are written and read.
 std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
                                            torch::Tensor opacities, torch::Tensor sh, torch::Tensor viewmats,
                                            torch::Tensor ks, int64_t width, int64_t height, double near, double far,
@@ -413,20 +434,32 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor qu
   TORCH_CHECK(sh_degree <= 3, "SH degree must be at most 3");
   const int64_t B = viewmats.size(0), N = means.size(0);
   const auto opts = means.options();
-  auto means2d = torch::zeros({B, N, 2}, opts);
-  auto conics = torch::zeros({B, N, 3}, opts);
-  auto rgb = torch::zeros({B, N, sh_degree >= 0 ? 3 : 0}, opts);
-  auto depth = torch::zeros({B, N}, opts);
-  auto radii = torch::zeros({B, N, 2}, opts);
-  auto rects = torch::zeros({B, N, 4}, torch::dtype(torch::kInt32));
-  auto valid = torch::zeros({B, N}, torch::dtype(torch::kBool));
+  auto means2d = torch::empty({B, N, 2}, opts);
+  auto conics = torch::empty({B, N, 3}, opts);
+  auto rgb = torch::empty({B, N, sh_degree >= 0 ? 3 : 0}, opts);
+  auto depth = torch::empty({B, N}, opts);
+  auto radii = torch::empty({B, N, 2}, opts);
+  auto rects = torch::empty({B, N, 4}, torch::dtype(torch::kInt32));
+  auto valid = torch::empty({B, N}, torch::dtype(torch::kBool));
   AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "gt2gs_project", [&] {
     project_forward_impl<scalar_t>(means.contiguous(), quats.contiguous(), scales.contiguous(),
                                    opacities.contiguous(), sh.contiguous(), viewmats.contiguous(), ks.contiguous(),
                                    width, height, near, far, sh_degree, means2d, conics, rgb, depth, radii, rects,
                                    valid);
   });
-  return {means2d, conics, rgb, depth, radii, rects, valid};
+  std::vector<int64_t> rows;
+  rows.reserve(size_t(B * N));
+  const bool* v = valid.data_ptr<bool>();
+  for (int64_t e = 0; e < B * N; ++e)
+    if (v[e]) rows.push_back(e);
+  const int64_t m = int64_t(rows.size());
+  auto cam_ids = torch::empty({m}, torch::dtype(torch::kInt64));
+  auto gauss_ids = torch::empty({m}, torch::dtype(torch::kInt64));
+  int64_t* ci = cam_ids.data_ptr<int64_t>();
+  int64_t* gi = gauss_ids.data_ptr<int64_t>();
+  for (int64_t k = 0; k < m; ++k) ci[k] = rows[k] / std::max<int64_t>(N, 1), gi[k] = rows[k] % std::max<int64_t>(N, 1);
+  return {gather_rows(means2d, rows), gather_rows(conics, rows), gather_rows(rgb, rows), gather_rows(depth, rows),
+          gather_rows(radii, rows), gather_rows(rects, rows), cam_ids, gauss_ids};
 }
 
 // Gradients of the entries (cam_ids, gauss_ids sorted by camera) w.r.t. means, quats, scales, sh.

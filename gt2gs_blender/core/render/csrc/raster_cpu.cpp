@@ -137,6 +137,8 @@ torch::Tensor depth_order(torch::Tensor depths) {
 
 // Counting sort of (entry, tile) pairs by tile; entries are visited in the given depth order, so
 // each tile's list comes out sorted front to back. Returns (tile_offsets[n_tiles+1], pair_gauss[P]).
+// Parallel: each thread counts, then scatters, one contiguous run of the depth order; a tile's slots
+// are handed out run by run, so the lists are exactly the serial sort's.
 std::vector<torch::Tensor> bin_tiles(torch::Tensor tile_bbox, torch::Tensor cam_ids, torch::Tensor depth_order,
                                      int64_t n_cams, int64_t tiles_x, int64_t tiles_y) {
   TORCH_CHECK(tile_bbox.dtype() == torch::kInt32 && tile_bbox.is_contiguous(), "tile_bbox must be int32 (M,4)");
@@ -148,30 +150,44 @@ std::vector<torch::Tensor> bin_tiles(torch::Tensor tile_bbox, torch::Tensor cam_
   const int32_t* bb = tile_bbox.data_ptr<int32_t>();
   const int32_t* cam = cam_ids.data_ptr<int32_t>();
   const int64_t* order = depth_order.data_ptr<int64_t>();
-
-  auto offsets = torch::zeros({n_tiles + 1}, torch::dtype(torch::kInt32));
-  int32_t* off = offsets.data_ptr<int32_t>();
-  for (int64_t i = 0; i < m; ++i) {
+  const int runs = static_cast<int>(std::min<int64_t>(num_threads(), std::max<int64_t>(1, m / 4096)));
+  auto run_begin = [&](int r) { return m * r / runs; };
+  auto for_each_tile = [&](int64_t i, auto&& visit) {
     const int32_t* b = bb + 4 * i;
     const int64_t base = cam[i] * tiles_per_cam;
     for (int32_t ty = b[1]; ty <= b[3]; ++ty)
-      for (int32_t tx = b[0]; tx <= b[2]; ++tx) off[base + ty * tiles_x + tx + 1] += 1;
+      for (int32_t tx = b[0]; tx <= b[2]; ++tx) visit(base + ty * tiles_x + tx);
+  };
+
+  std::vector<int64_t> slots(int64_t(runs) * n_tiles, 0);  // per run: its pairs per tile, then its first slot
+#pragma omp parallel for num_threads(runs) schedule(static, 1)
+  for (int r = 0; r < runs; ++r) {
+    int64_t* count = slots.data() + int64_t(r) * n_tiles;
+    for (int64_t k = run_begin(r); k < run_begin(r + 1); ++k) for_each_tile(order[k], [&](int64_t t) { ++count[t]; });
   }
+  auto offsets = torch::empty({n_tiles + 1}, torch::dtype(torch::kInt32));
+  int32_t* off = offsets.data_ptr<int32_t>();
   int64_t total = 0;
-  for (int64_t t = 1; t <= n_tiles; ++t) {
-    total += off[t];
-    TORCH_CHECK(total < INT32_MAX, "too many Gaussian/tile pairs for one render; render fewer cameras at once");
+  for (int64_t t = 0; t < n_tiles; ++t) {
     off[t] = static_cast<int32_t>(total);
+    for (int r = 0; r < runs; ++r) {
+      int64_t& slot = slots[int64_t(r) * n_tiles + t];
+      const int64_t n = slot;
+      slot = total;
+      total += n;
+    }
+    TORCH_CHECK(total < INT32_MAX, "too many Gaussian/tile pairs for one render; render fewer cameras at once");
   }
+  off[n_tiles] = static_cast<int32_t>(total);
   auto pairs = torch::empty({total}, torch::dtype(torch::kInt32));
   int32_t* pg = pairs.data_ptr<int32_t>();
-  std::vector<int32_t> cursor(off, off + n_tiles);
-  for (int64_t r = 0; r < m; ++r) {
-    const int64_t i = order[r];
-    const int32_t* b = bb + 4 * i;
-    const int64_t base = cam[i] * tiles_per_cam;
-    for (int32_t ty = b[1]; ty <= b[3]; ++ty)
-      for (int32_t tx = b[0]; tx <= b[2]; ++tx) pg[cursor[base + ty * tiles_x + tx]++] = static_cast<int32_t>(i);
+#pragma omp parallel for num_threads(runs) schedule(static, 1)
+  for (int r = 0; r < runs; ++r) {
+    int64_t* cursor = slots.data() + int64_t(r) * n_tiles;
+    for (int64_t k = run_begin(r); k < run_begin(r + 1); ++k) {
+      const int64_t i = order[k];
+      for_each_tile(i, [&](int64_t t) { pg[cursor[t]++] = static_cast<int32_t>(i); });
+    }
   }
   return {offsets, pairs};
 }
