@@ -138,6 +138,7 @@ class _Project(torch.autograd.Function):
         g_conics = means.new_zeros(zeros["con"]) if g_conics is None else g_conics
         g_rgb = means.new_zeros(zeros["rgb"]) if g_rgb is None else g_rgb
         g_depth = means.new_zeros(zeros["d"]) if g_depth is None else g_depth
+        geometry = any(ctx.needs_input_grad[:3])  # means, quats, scales: else a colour-only step
         gm, gq, gs, gsh = load_kernel().project_backward(
             means.detach(),
             quats.detach(),
@@ -154,7 +155,9 @@ class _Project(torch.autograd.Function):
             g_conics,
             g_rgb,
             g_depth,
+            geometry,
         )
+        gm, gq, gs = (gm, gq, gs) if geometry else (None, None, None)
         return gm, gq, gs, None, gsh if sh_degree >= 0 else None, None, None, None, None, None, None, None
 
 

@@ -259,6 +259,34 @@ void project_forward_impl(const torch::Tensor& means, const torch::Tensor& quats
   }
 }
 
+// The SH colour's backward for one entry: accumulates into the Gaussian's SH gradient and, when ``dmean``
+// is given, the view direction's share of the mean's gradient (degree > 0).
+template <typename T>
+void sh_backward_entry(const Cam& c, const T* mean, const T* shc, int64_t K, int sh_degree, const T* g_rgb, T* gsh,
+                       double* dmean) {
+  const double m3[3] = {double(mean[0]), double(mean[1]), double(mean[2])};
+  double d[3], len, basis[16], gb[16] = {0.0};
+  view_dir(c, m3, d, len);
+  sh_basis(d, sh_degree, basis);
+  const int64_t nb = (sh_degree + 1) * (sh_degree + 1);
+  for (int ch = 0; ch < 3; ++ch) {
+    double acc = 0.5;
+    for (int64_t k = 0; k < nb; ++k) acc += basis[k] * double(shc[k * 3 + ch]);
+    if (acc < 0.0) continue;  // clamped channel
+    const double gc = g_rgb[ch];
+    for (int64_t k = 0; k < nb; ++k) {
+      gsh[k * 3 + ch] += T(basis[k] * gc);
+      gb[k] += double(shc[k * 3 + ch]) * gc;
+    }
+  }
+  if (dmean != nullptr && sh_degree > 0 && len > 1e-12) {
+    double gd[3];
+    sh_basis_grad(d, sh_degree, gb, gd);
+    const double dot = gd[0] * d[0] + gd[1] * d[1] + gd[2] * d[2];
+    for (int i = 0; i < 3; ++i) dmean[i] += (gd[i] - d[i] * dot) / len;
+  }
+}
+
 // Backward for one entry: accumulates into the Gaussian's gradient slots.
 template <typename T>
 void project_backward_entry(const Cam& c, const T* mean, const T* quat, const T* scale, const T* shc, int64_t K,
@@ -340,29 +368,7 @@ void project_backward_entry(const Cam& c, const T* mean, const T* quat, const T*
     const double dot = dqn[0] * w + dqn[1] * qx + dqn[2] * qy + dqn[3] * qz;
     for (int i = 0; i < 4; ++i) gq[i] += T((dqn[i] - g.qn[i] * dot) / g.qnorm);
   }
-  if (sh_degree >= 0) {
-    const double m3[3] = {double(mean[0]), double(mean[1]), double(mean[2])};
-    double d[3], len, basis[16], gb[16] = {0.0};
-    view_dir(c, m3, d, len);
-    sh_basis(d, sh_degree, basis);
-    const int64_t nb = (sh_degree + 1) * (sh_degree + 1);
-    for (int ch = 0; ch < 3; ++ch) {
-      double acc = 0.5;
-      for (int64_t k = 0; k < nb; ++k) acc += basis[k] * double(shc[k * 3 + ch]);
-      if (acc < 0.0) continue;  // clamped channel
-      const double gc = g_rgb[ch];
-      for (int64_t k = 0; k < nb; ++k) {
-        gsh[k * 3 + ch] += T(basis[k] * gc);
-        gb[k] += double(shc[k * 3 + ch]) * gc;
-      }
-    }
-    if (sh_degree > 0 && len > 1e-12) {
-      double gd[3];
-      sh_basis_grad(d, sh_degree, gb, gd);
-      const double dot = gd[0] * d[0] + gd[1] * d[1] + gd[2] * d[2];
-      for (int i = 0; i < 3; ++i) dmean[i] += (gd[i] - d[i] * dot) / len;
-    }
-  }
+  if (sh_degree >= 0) sh_backward_entry<T>(c, mean, shc, K, sh_degree, g_rgb, gsh, dmean);
   for (int i = 0; i < 3; ++i) gm[i] += T(dmean[i]);
 }
 
@@ -372,7 +378,7 @@ void project_backward_impl(const torch::Tensor& means, const torch::Tensor& quat
                            int64_t width, int64_t height, int64_t sh_degree, const torch::Tensor& cam_ids,
                            const torch::Tensor& gauss_ids, const torch::Tensor& g_means2d,
                            const torch::Tensor& g_conics, const torch::Tensor& g_rgb, const torch::Tensor& g_depth,
-                           torch::Tensor& gm, torch::Tensor& gq, torch::Tensor& gs, torch::Tensor& gsh) {
+                           bool geometry, torch::Tensor& gm, torch::Tensor& gq, torch::Tensor& gs, torch::Tensor& gsh) {
   const int64_t M = cam_ids.size(0), B = viewmats.size(0);
   const int64_t K = sh_degree >= 0 ? sh.size(1) : 0;
   const int64_t* cam = cam_ids.data_ptr<int64_t>();
@@ -394,6 +400,12 @@ void project_backward_impl(const torch::Tensor& means, const torch::Tensor& quat
 #pragma omp parallel for schedule(static) num_threads(std::max(1, at::get_num_threads()))
     for (int64_t e = start; e < stop; ++e) {
       const int64_t n = gid[e];
+      if (!geometry) {
+        if (shg)
+          sh_backward_entry<T>(c, mp + 3 * n, shp + n * K * 3, K, int(sh_degree), rgb_grad + 3 * e, shg + n * K * 3,
+                               nullptr);
+        continue;
+      }
       project_backward_entry<T>(c, mp + 3 * n, qp + 4 * n, sp + 3 * n, shp ? shp + n * K * 3 : nullptr, K,
                                 int(sh_degree), gm2 + 2 * e, gcon + 3 * e, rgb_grad ? rgb_grad + 3 * e : nullptr,
                                 double(gdep[e]), gm.data_ptr<T>() + 3 * n, gq.data_ptr<T>() + 4 * n,
@@ -402,10 +414,6 @@ void project_backward_impl(const torch::Tensor& means, const torch::Tensor& quat
     start = stop;
   }
 }
-
-}  // namespace
-
-namespace {
 
 // The rows of the dense (B*N, ...) `dense` at `rows` (ascending), as a new (M, ...) tensor, in parallel.
 torch::Tensor gather_rows(const torch::Tensor& dense, const std::vector<int64_t>& rows) {
@@ -462,12 +470,13 @@ std::vector<torch::Tensor> project_forward(torch::Tensor means, torch::Tensor qu
           gather_rows(radii, rows), gather_rows(rects, rows), cam_ids, gauss_ids};
 }
 
-// Gradients of the entries (cam_ids, gauss_ids sorted by camera) w.r.t. means, quats, scales, sh.
+// Gradients of the entries (cam_ids, gauss_ids sorted by camera) w.r.t. means, quats, scales (when
+// ``geometry``) and sh.
 std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor quats, torch::Tensor scales,
                                             torch::Tensor sh, torch::Tensor viewmats, torch::Tensor ks,
                                             int64_t width, int64_t height, int64_t sh_degree, torch::Tensor cam_ids,
                                             torch::Tensor gauss_ids, torch::Tensor g_means2d, torch::Tensor g_conics,
-                                            torch::Tensor g_rgb, torch::Tensor g_depth) {
+                                            torch::Tensor g_rgb, torch::Tensor g_depth, bool geometry) {
   means = means.contiguous();
   quats = quats.contiguous();
   scales = scales.contiguous();
@@ -480,11 +489,13 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor q
   g_conics = g_conics.contiguous();
   g_rgb = g_rgb.contiguous();
   g_depth = g_depth.contiguous();
-  auto gm = torch::zeros_like(means), gq = torch::zeros_like(quats), gs = torch::zeros_like(scales);
+  // without ``geometry`` only the SH gradient is computed (the geometry's are empty): a colour-only step
+  auto geometry_grad = [&](const torch::Tensor& t) { return geometry ? torch::zeros_like(t) : t.new_empty({0}); };
+  auto gm = geometry_grad(means), gq = geometry_grad(quats), gs = geometry_grad(scales);
   auto gsh = torch::zeros_like(sh);
   AT_DISPATCH_FLOATING_TYPES(means.scalar_type(), "gt2gs_project_backward", [&] {
     project_backward_impl<scalar_t>(means, quats, scales, sh, viewmats, ks, width, height, sh_degree, cam_ids,
-                                    gauss_ids, g_means2d, g_conics, g_rgb, g_depth, gm, gq, gs, gsh);
+                                    gauss_ids, g_means2d, g_conics, g_rgb, g_depth, geometry, gm, gq, gs, gsh);
   });
   return {gm, gq, gs, gsh};
 }

@@ -539,7 +539,7 @@ std::vector<torch::Tensor> project_backward(torch::Tensor means, torch::Tensor q
                                             torch::Tensor sh, torch::Tensor viewmats, torch::Tensor ks,
                                             int64_t width, int64_t height, int64_t sh_degree, torch::Tensor cam_ids,
                                             torch::Tensor gauss_ids, torch::Tensor g_means2d, torch::Tensor g_conics,
-                                            torch::Tensor g_rgb, torch::Tensor g_depth);
+                                            torch::Tensor g_rgb, torch::Tensor g_depth, bool geometry);
 
 PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("project_forward", &project_forward, "Project Gaussians into cameras");
