@@ -78,6 +78,7 @@ class _Composite(torch.autograd.Function):
             grad_image = colors.new_zeros(n_cams, height, width, colors.shape[1])
         if grad_alpha is None:
             grad_alpha = torch.zeros_like(final_t)
+        geometry = ctx.needs_input_grad[0] or ctx.needs_input_grad[1] or ctx.needs_input_grad[3]
         g_means, g_conics, g_colors, g_op = load_kernel().backward(
             means2d,
             conics,
@@ -92,6 +93,7 @@ class _Composite(torch.autograd.Function):
             n_cams,
             width,
             height,
+            geometry,
         )
         return g_means, g_conics, g_colors, g_op, None, None, None, None
 
@@ -195,6 +197,9 @@ def project(
     )
     if sh_degree is None:
         rgb = colors[gauss_ids]
+    if not (means.requires_grad or quats.requires_grad or scales.requires_grad):
+        # the projected geometry does not depend on the colours: a colour-only step's compositing skips it
+        means2d, conics, depth = means2d.detach(), conics.detach(), depth.detach()
     return Projection(
         cam_ids=cam_ids,
         gauss_ids=gauss_ids,

@@ -371,7 +371,9 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
   }
 }
 
-template <typename T, int NC>
+// GEOM false: a colour-only step (nothing upstream trains means, conics or opacities): only the colour
+// gradients are computed, the record's other columns stay zero.
+template <typename T, int NC, bool GEOM>
 torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
                             const torch::Tensor& opacities, const torch::Tensor& tile_offsets,
                             const torch::Tensor& pair_gauss, const torch::Tensor& final_t,
@@ -456,6 +458,10 @@ torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& c
           const V t = trans[r] * inv;  // transmittance in front of this splat (unchanged when not hit)
           trans[r] = t;
           const V w = alpha * t;
+          if constexpr (!GEOM) {
+            for (int64_t ch = 0; ch < C; ++ch) rec[6 + ch] += w * grad[r][ch];
+            continue;
+          }
           V d_alpha = g_alpha[r] * t_final[r] * inv;
           for (int64_t ch = 0; ch < C; ++ch) {
             const V g = grad[r][ch];
@@ -476,7 +482,7 @@ torch::Tensor backward_impl(const torch::Tensor& means2d, const torch::Tensor& c
         }
         if (!touched) continue;
         T* dst = mine + static_cast<int64_t>(pg[k]) * stride;
-        for (int64_t j = 0; j < stride; ++j) {
+        for (int64_t j = GEOM ? 0 : 6; j < stride; ++j) {
           T sum = T(0);
           for (int l = 0; l < kTile; ++l) sum += rec[j][l];
           dst[j] += sum;
@@ -509,20 +515,23 @@ std::vector<torch::Tensor> forward(torch::Tensor means2d, torch::Tensor conics, 
 }
 
 // Backward of forward(): gradients w.r.t. means2d, conics, colors and opacities given the gradients
-// of the composited colour and of alpha = 1 - transmittance.
+// of the composited colour and of alpha = 1 - transmittance (without ``geometry`` only the colours',
+// the others zero).
 std::vector<torch::Tensor> backward(torch::Tensor means2d, torch::Tensor conics, torch::Tensor colors,
                                     torch::Tensor opacities, torch::Tensor tile_offsets, torch::Tensor pair_gauss,
                                     torch::Tensor final_t, torch::Tensor pixel_end, torch::Tensor grad_color,
-                                    torch::Tensor grad_alpha, int64_t n_cams, int64_t width, int64_t height) {
+                                    torch::Tensor grad_alpha, int64_t n_cams, int64_t width, int64_t height,
+                                    bool geometry) {
   check_inputs(means2d, conics, colors, opacities);
   grad_color = grad_color.to(means2d.dtype()).contiguous();
   grad_alpha = grad_alpha.to(means2d.dtype()).contiguous();
   torch::Tensor total;
   AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_backward", [&] {
     dispatch_channels(colors.size(1), [&](auto channels) {
-      total = backward_impl<scalar_t, decltype(channels)::value>(means2d, conics, colors, opacities, tile_offsets,
-                                                                pair_gauss, final_t, pixel_end, grad_color,
-                                                                grad_alpha, n_cams, width, height);
+      constexpr int nc = decltype(channels)::value;
+      const auto run = geometry ? backward_impl<scalar_t, nc, true> : backward_impl<scalar_t, nc, false>;
+      total = run(means2d, conics, colors, opacities, tile_offsets, pair_gauss, final_t, pixel_end, grad_color,
+                  grad_alpha, n_cams, width, height);
     });
   });
   const int64_t M = means2d.size(0), C = colors.size(1);
