@@ -19,7 +19,8 @@ from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
 from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.train.densify import DensifyConfig
 from gt2gs_blender.core.train.optim import PARAM_NAMES, GaussianAdam, LearningRates, exponential_decay
-from gt2gs_blender.core.train.reconstruction import reconstruction_loss
+from gt2gs_blender.core.train.reconstruction import reconstruction_loss, window_max
+from gt2gs_blender.core.train.ssim import WINDOW
 
 FAST_LRS = LearningRates(means=3e-3, means_final=3e-4, quats=1e-2, log_scales=1e-2, sh_dc=1e-2)
 """Learning rates for tiny synthetic fits (3DGS's are tuned for 30k steps)."""
@@ -313,3 +314,9 @@ def test_reconstruction_tolerance_passes_no_gradient_below_it_and_the_same_direc
         torch.autograd.grad(reconstruction_loss(far, target, tolerance=t), far)[0].flatten() for t in (0.0, 0.5 / 255)
     ]
     assert torch.nn.functional.cosine_similarity(grads[0], grads[1], dim=0) > 0.99
+
+
+def test_window_max_equals_a_2d_max_pool():
+    """The separable window maximum the tolerance uses is exactly one 2D max pool over the SSIM window."""
+    images = torch.rand(2, 3, 40, 33, generator=torch.Generator().manual_seed(1))
+    assert torch.equal(window_max(images), torch.nn.functional.max_pool2d(images, WINDOW, stride=1))
