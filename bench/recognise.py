@@ -29,7 +29,7 @@ the texture (the structure measures reward the texture alone; this is the other 
 original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
-settings they ran with; ``--reuse`` measures them again instead of transferring when the settings match (and
+settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again instead of transferring when the settings match (and
 ``--reuse-older`` also when the saved settings predate some of today's settings, listed in the row).
 
 Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
@@ -307,9 +307,9 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                     result_scene, features = result.scene, result.report.get("weights")
                     folder.mkdir(parents=True, exist_ok=True)
                     write_ply(saved, result_scene)
-                    saved.with_suffix(".json").write_text(
-                        json.dumps({"config": settings, "seconds": seconds, "features": features}, default=str)
-                    )
+                    kept = {"config": settings, "seconds": seconds, "features": features}
+                    kept.update({key: result.report.get(key) for key in ("stage_seconds", "stylise", "metrics")})
+                    saved.with_suffix(".json").write_text(json.dumps(kept, default=str))
                 views = held_out_renders(result_scene, bench)
                 result_stats = view_stats(views)
                 t = row(name, texture, variant, score(result_stats, stats), seconds)
