@@ -29,8 +29,9 @@ the texture (the structure measures reward the texture alone; this is the other 
 original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
-settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again instead of transferring when the settings match (and
-``--reuse-older`` also when the saved settings predate some of today's settings, listed in the row).
+settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
+instead of transferring when the settings match (and ``--reuse-older`` also when the saved settings predate
+some of today's settings, listed in the row).
 
 Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
 (rows: textures; columns: texture | projected | layout start | original | each result's held-out views). The
