@@ -69,6 +69,12 @@ SKIPS: dict[str, tuple[str, dict[str, Any], dict[str, Any], Path]] = {
         {"adaptive_angles": False},
         STRAW,
     ),
+    "reuse": (
+        "colour-only steps redrawn from kept compositing weights",
+        {"reuse_weights": True},
+        {"reuse_weights": False},
+        HERRINGBONE,
+    ),
     "caches": ("bank on disk + content renders reused (2nd run)", {}, {}, HERRINGBONE),
 }
 

@@ -195,6 +195,22 @@ def test_full_schedule_reports_its_phases(tmp_path):
     assert all(torch.isfinite(t).all() for t in result.scene.tensors().values())
 
 
+def test_still_splats_are_redrawn_from_kept_weights_until_the_geometry_moves(tmp_path):
+    """Colour-only steps reuse each view's compositing weights within a stylise phase, never across a
+    correct phase or a densification, and optimise as full renders do (to float rounding)."""
+    config = tiny(cache_dir=str(tmp_path), stylise_steps=12, correct_steps=4, rounds=2, gpb=True, plateau_window=0)
+    on = transfer(blob_scene(), stripes(), None, config)
+    off = transfer(blob_scene(), stripes(), None, replace(config, reuse_weights=False))
+    assert on.report["stylise"]["reused_weights"] == 12 - 2 * 3  # 2 phases of 6 steps, each view fresh once
+    assert off.report["stylise"]["reused_weights"] == 0
+    torch.testing.assert_close(on.scene.sh_dc, off.scene.sh_dc, atol=1e-4, rtol=0)
+    torch.testing.assert_close(on.scene.means, off.scene.means, atol=1e-5, rtol=0)
+    growing = replace(config, densify=True, densify_every=2, densify_grad_threshold=0.0, densify_max_growth=100.0)
+    densified = transfer(blob_scene(), stripes(), None, growing)
+    assert all(d["cloned"] + d["split"] > 0 for d in densified.report["stylise"]["densified"])
+    assert densified.report["stylise"]["reused_weights"] == 6 - 3  # none in the densifying first phase
+
+
 def dominant_orientation(image: np.ndarray) -> float:
     """Structure-tensor orientation (degrees in [0, 180)) of the image's gradients, on the grey image."""
     gray = image.mean(axis=-1)

@@ -5,60 +5,34 @@ for a batch of same-size cameras. Alpha rules, identical in every backend: a Gau
 is where alpha = opacity * exp(-d^T Sigma^-1 d / 2) >= 1/255 (with 0.3 px^2 dilation of Sigma);
 alpha is clamped to 0.99; a pixel stops before the Gaussian that would bring its transmittance
 below 1e-4. Backends: ``cpu`` (C++/OpenMP kernel), ``torch`` (portable, CPU or CUDA), ``gsplat``
-(CUDA kernels when installed).
+(CUDA kernels when installed). ``fix_geometry()`` records a render's compositing weights, so that
+while the geometry holds still any colours are redrawn as a weighted gather (``fixed_geometry``).
 """
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import torch
 
 from ..cameras.camera import Camera, stack_cameras
 from ..scene.gaussians import GaussianScene
 from . import cpu_backend, gsplat_backend, torch_backend
-from .projection import Footprints, project
+from .backends import BACKENDS, available_backends, resolve_backend
+from .fixed_geometry import FixedGeometry, fix_geometry
+from .output import RenderOutput
+from .projection import FAR_PLANE, NEAR_PLANE, project
 
-BACKENDS = ("torch", "cpu", "gsplat")
-log = logging.getLogger(__name__)
-
-
-@dataclass
-class RenderOutput:
-    """Renders of B cameras. ``footprints`` holds the visible (camera, Gaussian) entries with their
-    differentiable 2D means and extents (for densification statistics), from every backend."""
-
-    colors: torch.Tensor  # (B, H, W, D) composited over the background
-    depths: torch.Tensor | None  # (B, H, W) expected depth sum T*alpha*z (not divided by alpha)
-    alphas: torch.Tensor  # (B, H, W)
-    backend: str
-    footprints: Footprints
-
-
-def available_backends(device: torch.device | str = "cpu") -> list[str]:
-    """Backends that can render on ``device`` here, fastest first."""
-    device = torch.device(device)
-    if device.type == "cuda":
-        return (["gsplat"] if gsplat_backend.available() else []) + ["torch"]
-    return (["cpu"] if cpu_backend.load_kernel() is not None else []) + ["torch"]
-
-
-def resolve_backend(backend: str, device: torch.device | str) -> str:
-    """The backend that will run: ``auto`` picks the fastest; an unavailable choice falls back, logged."""
-    if backend != "auto" and backend not in BACKENDS:
-        raise ValueError(f"unknown rasterizer backend {backend!r}; choose one of auto, {', '.join(BACKENDS)}")
-    if backend == "torch":  # always usable; never pay for building the C++ kernel
-        return backend
-    usable = available_backends(device)
-    if backend == "auto":
-        return usable[0]
-    if backend not in usable:
-        reason = cpu_backend.unavailable_reason() if backend == "cpu" else f"not usable on {torch.device(device)}"
-        log.warning("rasterizer backend %r unavailable (%s); using %r", backend, reason, usable[0])
-        return usable[0]
-    return backend
+__all__ = [
+    "BACKENDS",
+    "FixedGeometry",
+    "RenderOutput",
+    "available_backends",
+    "fix_geometry",
+    "rasterization",
+    "render",
+    "resolve_backend",
+]
 
 
 def rasterization(
@@ -73,8 +47,8 @@ def rasterization(
     height: int,
     *,
     sh_degree: int | None = None,
-    near_plane: float = 0.01,
-    far_plane: float = 1e10,
+    near_plane: float = NEAR_PLANE,
+    far_plane: float = FAR_PLANE,
     backgrounds: torch.Tensor | None = None,
     render_depth: bool = True,
     backend: str = "auto",

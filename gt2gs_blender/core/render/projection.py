@@ -15,6 +15,9 @@ from ..scene.gaussians import quats_to_rotmats
 from .sh import eval_sh, sh0_to_rgb
 
 TILE = 8
+NEAR_PLANE = 0.01
+FAR_PLANE = 1e10
+"""Default clipping depths of a render (camera-space z)."""
 ALPHA_MIN = 1.0 / 255.0
 EPS2D = 0.3
 """Screen-space dilation (px^2) added to every 2D covariance, as in 3DGS (anti-aliasing floor)."""
@@ -165,7 +168,7 @@ def project(
     cab = torch.stack([c, -b, a], -1).index_select(0, idx)
     conics = (cab / det.index_select(0, idx)[:, None]).to(means.dtype)
     cam_ids, gauss_ids, p_cam = cam_ids[idx], gauss_ids[idx], p_cam.index_select(0, idx)
-    rgb = _entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
+    rgb = entry_colors(colors, means, viewmats, cam_ids, gauss_ids, sh_degree)
     return Projection(
         cam_ids=cam_ids,
         gauss_ids=gauss_ids,
@@ -184,7 +187,7 @@ def with_depth_channel(rgb: torch.Tensor, depth: torch.Tensor, with_depth: bool)
     return torch.cat([rgb, depth[:, None]], dim=-1) if with_depth else rgb
 
 
-def _entry_colors(
+def entry_colors(
     colors: torch.Tensor,
     means: torch.Tensor,
     viewmats: torch.Tensor,

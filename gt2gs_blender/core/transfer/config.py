@@ -399,6 +399,13 @@ class TransferConfig:
         "Render the original only up to its highest spherical-harmonic band in use",
         "speed",
     )
+    reuse_weights: bool = setting(
+        True,
+        "Reuse Still Renders",
+        "While the splats hold still, redraw each view from its compositing weights kept in memory "
+        "(same result, faster)",
+        "speed",
+    )
     plateau_window: int = setting(
         16,
         "Plateau Window",

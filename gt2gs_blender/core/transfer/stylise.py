@@ -31,7 +31,7 @@ import torch
 from ..cameras.camera import Camera, camera_extent
 from ..cameras.spread import cameras_from_front
 from ..features.extractor import FeatureExtractor
-from ..render import render
+from ..render import FixedGeometry, RenderOutput, fix_geometry, render
 from ..scene.gaussians import GaussianScene
 from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
 from ..train.optim import GaussianAdam, LearningRates
@@ -47,6 +47,9 @@ GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
 COLOR_ATTACHMENT = "c_g"
 CORRECT_TOLERANCE = 0.5 / 255
 """Residuals the correction phases leave alone: half an 8-bit grey level (see train.reconstruction)."""
+REUSE_BUDGET = 1 << 30
+"""Bytes of compositing weights kept across steps (~8 MiB per 256 px view of a 300k-splat donut); views
+beyond it are redrawn from fresh weights every step (still cheaper than a full render's backward)."""
 RATIO_ATTACHMENT = "ratio_limit"
 """Per Gaussian, the scale ratio the correction phases tolerate (children inherit their parent's)."""
 
@@ -80,6 +83,7 @@ class StyliseStats:
     moved_splats: bool = False  # whether the stylise phases moved the geometry (Texture Moves Splats)
     densified: list[dict] = field(default_factory=list)
     plateau_skipped: dict[str, int] = field(default_factory=dict)  # steps left out at a loss plateau, per phase
+    reused_weights: int = 0  # stylise steps drawn from compositing weights kept from an earlier step
 
 
 def moves_splats(cameras: list[Camera], choice: str) -> bool:
@@ -150,6 +154,7 @@ class Styliser:
         self.cursor = 0
         self.generator = torch.Generator().manual_seed(config.seed)
         self.report = StyliseStats(moved_splats=moves_splats([v.camera for v in views], config.stylise_geometry))
+        self.kept: dict[int, FixedGeometry] = {}
 
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
@@ -197,7 +202,7 @@ class Styliser:
         v = self.order[self.cursor]
         view = self.views[v]
         self.opt.set_trainable(self.colors + GEOMETRY if self.report.moved_splats else self.colors)
-        out = render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
+        out = self._stylise_render(v, view)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
         distances, weights = self._texture_terms(feats[0], v, view)
@@ -222,6 +227,8 @@ class Styliser:
             done = densify_and_prune(
                 self.opt, self.stats, self.densify_config, self.extent, prune_large=False, generator=self.generator
             )
+            if done.cloned or done.split or done.pruned:
+                self.kept.clear()
             self.report.densified.append(
                 {
                     "step": self.report.stylise_steps,
@@ -233,6 +240,23 @@ class Styliser:
             )
         shown = image.detach() + (1.0 - out.alphas[0].detach()[..., None]) * (self.background - view.backdrop)
         return float(style.detach()), shown
+
+    def _stylise_render(self, v: int, view: ViewTargets) -> RenderOutput:
+        """View ``v`` with the current colours. While the splats hold still (a colour-only step, and
+        ``reuse_weights``), from the view's compositing weights, recorded once and kept until the geometry
+        changes (within ``REUSE_BUDGET``); else a full render."""
+        cfg = self.config
+        full = not cfg.reuse_weights or self.report.moved_splats
+        fixed = None if full else self.kept.get(v)
+        if fixed is not None:
+            self.report.reused_weights += 1
+        elif not full:
+            fixed = fix_geometry(self.scene, [view.camera], backend=cfg.backend)
+            if fixed is not None and fixed.nbytes + sum(k.nbytes for k in self.kept.values()) <= REUSE_BUDGET:
+                self.kept[v] = fixed
+        if fixed is None:
+            return render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
+        return fixed.render(self.scene, background=view.backdrop)
 
     def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
         """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
@@ -300,6 +324,7 @@ class Styliser:
         )
         loss.backward()
         self._step(loss)
+        self.kept.clear()  # the geometry moved
         self.report.correct_steps += 1
         return float(loss.detach())
 

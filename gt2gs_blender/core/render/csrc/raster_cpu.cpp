@@ -1,4 +1,5 @@
-// Tile-based Gaussian compositing on the CPU (OpenMP over 8x8 tiles), forward and backward.
+// Tile-based Gaussian compositing on the CPU (OpenMP over 8x8 tiles), forward and backward, and the
+// forward's per-pixel weights (contributions) with the gather/scatter that redraw colours from them.
 //
 // Inputs are the projected, culled Gaussians of all cameras ("entries"): 2D means in pixels
 // (pixel centres at +0.5), conics (inverse 2D covariance a, b, c), per-entry colour channels and
@@ -92,7 +93,7 @@ void gather_tile(const T* means2d, const T* conics, const T* opacities, const Fo
 }  // namespace
 
 // Entry indices in ascending depth order, ties by index (a stable LSD radix sort of the float32 bits, 3 passes
-// of 11 bits: linear, ~8x faster than torch.argsort on 2 cores). Negative depths sort before positive ones
+// of 11 bits: linear, ~11x faster than torch.argsort on 2 cores). Negative depths sort before positive ones
 // (the usual sign flip; -0 as +0), so any finite depth is ordered as a float comparison would.
 torch::Tensor depth_order(torch::Tensor depths) {
   TORCH_CHECK(depths.dtype() == torch::kFloat32 && depths.is_contiguous() && depths.dim() == 1,
@@ -283,33 +284,33 @@ struct TileOrigin {
   }
 };
 
-template <typename T, int NC>
-void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
-                  const torch::Tensor& opacities, const torch::Tensor& tile_offsets, const torch::Tensor& pair_gauss,
-                  int64_t n_cams, int64_t width, int64_t height, torch::Tensor& out_color, torch::Tensor& out_t,
-                  torch::Tensor& out_end) {
+// The front-to-back sweep of forward() and contributions(): per tile, per splat in depth order, the weight
+// w = alpha T each still-compositing pixel gives it, handed to a Sink per thread (begin(tile), add(row, pair
+// index, w), end(tile)); writes each pixel's final transmittance and one past its last contributing pair.
+template <typename T, typename MakeSink>
+void sweep(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& opacities,
+           const torch::Tensor& tile_offsets, const torch::Tensor& pair_gauss, int64_t n_cams, int64_t width,
+           int64_t height, torch::Tensor& out_t, torch::Tensor& out_end, MakeSink&& make_sink) {
   using V = typename Lanes<T>::V;
   using M = typename Lanes<T>::M;
   using I = typename Lanes<T>::I;
-  const int64_t C = NC > 0 ? NC : colors.size(1);
   const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
   const int64_t n_tiles = n_cams * tiles_x * tiles_y;
   const T* m2 = means2d.data_ptr<T>();
   const T* cn = conics.data_ptr<T>();
-  const T* col = colors.data_ptr<T>();
   const T* op = opacities.data_ptr<T>();
   const int32_t* off = tile_offsets.data_ptr<int32_t>();
   const int32_t* pg = pair_gauss.data_ptr<int32_t>();
-  T* oc = out_color.data_ptr<T>();
   T* ot = out_t.data_ptr<T>();
   int32_t* oe = out_end.data_ptr<int32_t>();
   const Footprints<T> foot(cn, op, means2d.size(0));
 
 #pragma omp parallel num_threads(num_threads())
   {
+    auto sink = make_sink();
     std::vector<Splat<T>> splats;
-    // per row of lanes: transmittance, still compositing (mask), one past the last splat, colour sums
-    V trans[kTile], acc[kTile][kMaxChannels];
+    // per row of lanes: transmittance, still compositing (mask), one past the last splat
+    V trans[kTile];
     M live[kTile], last[kTile];
     bool row_live[kTile];
 #pragma omp for schedule(dynamic, 2)
@@ -318,6 +319,7 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
       if (begin == end) continue;
       const TileOrigin o(tile, tiles_x, tiles_y, width, height);
       gather_tile(m2, cn, op, foot, pg, begin, end, o.y0, o.last_y, splats);
+      sink.begin(tile);
       V fx;
       M inside;
       for (int l = 0; l < kTile; ++l) {
@@ -330,11 +332,9 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
         last[r] = M{} + static_cast<I>(begin);
         live[r] = inside;
         row_live[r] = r < rows_live;
-        for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] = V{};
       }
       for (int64_t k = begin; k < end && rows_live > 0; ++k) {
         const Splat<T>& s = splats[k - begin];
-        const T* c = col + static_cast<int64_t>(pg[k]) * C;
         for (int32_t r = s.row_lo; r <= s.row_hi; ++r) {
           if (!row_live[r]) continue;
           const V dx = s.mx - fx, dy = V{} + (s.my - (T(o.y0 + r) + T(0.5)));
@@ -346,8 +346,7 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
           const V next_t = trans[r] * (T(1) - alpha);
           const M stop = next_t < Rules<T>::transmittance_min;  // only a hit can bring it below
           const M use = hit & ~stop;
-          const V w = use ? alpha * trans[r] : V{};
-          for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] += w * c[ch];
+          sink.add(r, k, use ? alpha * trans[r] : V{});
           trans[r] = use ? next_t : trans[r];
           last[r] = use ? M{} + static_cast<I>(k + 1) : last[r];
           if (any_lane(stop)) {
@@ -359,16 +358,126 @@ void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, con
           }
         }
       }
+      sink.end(o);
       for (int32_t r = 0; r <= o.last_y; ++r) {
         for (int32_t l = 0; l <= o.last_x; ++l) {
           const int64_t pix = o.pixel(width, height, r, l);
-          for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[r][ch][l];
           ot[pix] = trans[r][l];
           oe[pix] = static_cast<int32_t>(last[r][l]);
         }
       }
     }
   }
+}
+
+// forward()'s sink: sums w * colour per pixel and writes the tile's colours.
+template <typename T, int NC>
+struct ColourSink {
+  using V = typename Lanes<T>::V;
+  const T* col;
+  const int32_t* pg;
+  int64_t C, width, height;
+  T* oc;
+  V acc[kTile][kMaxChannels];
+
+  void begin(int64_t) {
+    for (int r = 0; r < kTile; ++r)
+      for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] = V{};
+  }
+  void add(int32_t r, int64_t k, V w) {
+    const T* c = col + static_cast<int64_t>(pg[k]) * C;
+    for (int64_t ch = 0; ch < C; ++ch) acc[r][ch] += w * c[ch];
+  }
+  void end(const TileOrigin& o) {
+    for (int32_t r = 0; r <= o.last_y; ++r)
+      for (int32_t l = 0; l <= o.last_x; ++l) {
+        const int64_t pix = o.pixel(width, height, r, l);
+        for (int64_t ch = 0; ch < C; ++ch) oc[pix * C + ch] = acc[r][ch][l];
+      }
+  }
+};
+
+template <typename T, int NC>
+void forward_impl(const torch::Tensor& means2d, const torch::Tensor& conics, const torch::Tensor& colors,
+                  const torch::Tensor& opacities, const torch::Tensor& tile_offsets, const torch::Tensor& pair_gauss,
+                  int64_t n_cams, int64_t width, int64_t height, torch::Tensor& out_color, torch::Tensor& out_t,
+                  torch::Tensor& out_end) {
+  const int64_t C = NC > 0 ? NC : colors.size(1);
+  const T* col = colors.data_ptr<T>();
+  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
+  T* oc = out_color.data_ptr<T>();
+  sweep<T>(means2d, conics, opacities, tile_offsets, pair_gauss, n_cams, width, height, out_t, out_end,
+           [&] { return ColourSink<T, NC>{col, pg, C, width, height, oc, {}}; });
+}
+
+// One recorded contribution: the pixel (within its tile: row * 8 + lane), the entry, its weight.
+template <typename T>
+struct Contribution {
+  int32_t lane;
+  int32_t entry;
+  T weight;
+};
+
+// contributions()'s sink: keeps each tile's non-zero weights, in depth order, for the CSR assembly.
+template <typename T>
+struct RecordSink {
+  using V = typename Lanes<T>::V;
+  const int32_t* pg;
+  std::vector<std::vector<Contribution<T>>>* tiles;
+  std::vector<Contribution<T>> current;
+
+  int64_t tile = 0;
+
+  void begin(int64_t t) {
+    tile = t;
+    current.clear();
+  }
+  void add(int32_t r, int64_t k, V w) {  // a used lane's weight is > 0: alpha >= 1/255 and T >= 1e-4
+    for (int l = 0; l < kTile; ++l)
+      if (w[l] != T(0)) current.push_back({r * kTile + l, pg[k], w[l]});
+  }
+  void end(const TileOrigin&) { (*tiles)[tile] = current; }
+};
+
+// Per pixel, the compositing weights the sweep records, as CSR over the pixels (B*H*W rows, in image order;
+// each row's entries front to back): (offsets int64, entries int32, weights, final transmittance).
+template <typename T>
+std::vector<torch::Tensor> contributions_impl(const torch::Tensor& means2d, const torch::Tensor& conics,
+                                              const torch::Tensor& opacities, const torch::Tensor& tile_offsets,
+                                              const torch::Tensor& pair_gauss, int64_t n_cams, int64_t width,
+                                              int64_t height) {
+  const int64_t tiles_x = (width + kTile - 1) / kTile, tiles_y = (height + kTile - 1) / kTile;
+  const int64_t n_tiles = n_cams * tiles_x * tiles_y, n_pixels = n_cams * height * width;
+  auto out_t = torch::ones({n_cams, height, width}, means2d.options());
+  auto out_end = torch::zeros({n_cams, height, width}, torch::dtype(torch::kInt32));
+  std::vector<std::vector<Contribution<T>>> tiles(n_tiles);
+  const int32_t* pg = pair_gauss.data_ptr<int32_t>();
+  sweep<T>(means2d, conics, opacities, tile_offsets, pair_gauss, n_cams, width, height, out_t, out_end,
+           [&] { return RecordSink<T>{pg, &tiles, {}}; });
+  auto offsets = torch::zeros({n_pixels + 1}, torch::dtype(torch::kInt64));
+  int64_t* row = offsets.data_ptr<int64_t>();
+  auto pixel_of = [&](int64_t tile, int32_t lane) {
+    return TileOrigin(tile, tiles_x, tiles_y, width, height).pixel(width, height, lane / kTile, lane % kTile);
+  };
+#pragma omp parallel for num_threads(num_threads()) schedule(dynamic, 8)
+  for (int64_t t = 0; t < n_tiles; ++t)  // a pixel belongs to one tile: no two threads count it
+    for (const auto& c : tiles[t]) ++row[pixel_of(t, c.lane) + 1];
+  for (int64_t p = 0; p < n_pixels; ++p) row[p + 1] += row[p];
+  auto entries = torch::empty({row[n_pixels]}, torch::dtype(torch::kInt32));
+  auto weights = torch::empty({row[n_pixels]}, means2d.options());
+  int32_t* ent = entries.data_ptr<int32_t>();
+  T* wt = weights.data_ptr<T>();
+  std::vector<int64_t> cursor(row, row + n_pixels);
+#pragma omp parallel for num_threads(num_threads()) schedule(dynamic, 8)
+  for (int64_t t = 0; t < n_tiles; ++t) {
+    for (const auto& c : tiles[t]) {
+      const int64_t slot = cursor[pixel_of(t, c.lane)]++;
+      ent[slot] = c.entry;
+      wt[slot] = c.weight;
+    }
+    std::vector<Contribution<T>>().swap(tiles[t]);
+  }
+  return {offsets, entries, weights, out_t};
 }
 
 // GEOM false: a colour-only step (nothing upstream trains means, conics or opacities): only the colour
@@ -514,6 +623,87 @@ std::vector<torch::Tensor> forward(torch::Tensor means2d, torch::Tensor conics, 
   return {out_color, out_t, out_end};
 }
 
+// The weights forward() gives each entry at each pixel (w = alpha T, the colour-independent part of the
+// composite: colour = sum w c), as CSR over the B*H*W pixels: (offsets, entries, weights, transmittance).
+std::vector<torch::Tensor> contributions(torch::Tensor means2d, torch::Tensor conics, torch::Tensor opacities,
+                                         torch::Tensor tile_offsets, torch::Tensor pair_gauss, int64_t n_cams,
+                                         int64_t width, int64_t height) {
+  check_inputs(means2d, conics, opacities.reshape({-1, 1}), opacities);
+  std::vector<torch::Tensor> out;
+  AT_DISPATCH_FLOATING_TYPES(means2d.scalar_type(), "gt2gs_contributions", [&] {
+    out = contributions_impl<scalar_t>(means2d, conics, opacities, tile_offsets, pair_gauss, n_cams, width, height);
+  });
+  return out;
+}
+
+namespace {
+
+template <typename T>
+void weighted_rows_impl(const int64_t* row, const int32_t* ent, const T* w, const T* v, int64_t rows, int64_t C,
+                        T* out) {
+#pragma omp parallel for num_threads(num_threads()) schedule(static, 256)
+  for (int64_t p = 0; p < rows; ++p) {
+    T acc[kMaxChannels] = {};
+    for (int64_t k = row[p]; k < row[p + 1]; ++k)
+      for (int64_t ch = 0; ch < C; ++ch) acc[ch] += w[k] * v[static_cast<int64_t>(ent[k]) * C + ch];
+    for (int64_t ch = 0; ch < C; ++ch) out[p * C + ch] = acc[ch];
+  }
+}
+
+template <typename T>
+void weighted_rows_backward_impl(const int64_t* row, const int32_t* ent, const T* w, const T* g, int64_t rows,
+                                 int64_t C, int64_t n_values, int n_threads, T* buf) {
+#pragma omp parallel num_threads(n_threads)
+  {
+    T* mine = buf + static_cast<int64_t>(omp_get_thread_num()) * n_values * C;
+#pragma omp for schedule(static)
+    for (int64_t p = 0; p < rows; ++p)
+      for (int64_t k = row[p]; k < row[p + 1]; ++k)
+        for (int64_t ch = 0; ch < C; ++ch) mine[static_cast<int64_t>(ent[k]) * C + ch] += w[k] * g[p * C + ch];
+  }
+}
+
+void check_rows(const torch::Tensor& offsets, const torch::Tensor& entries, const torch::Tensor& weights,
+                const torch::Tensor& values) {
+  TORCH_CHECK(offsets.dtype() == torch::kInt64 && entries.dtype() == torch::kInt32, "offsets int64, entries int32");
+  TORCH_CHECK(weights.dtype() == values.dtype() && values.dim() == 2, "weights and values (M,C) of one dtype");
+  TORCH_CHECK(values.size(1) <= kMaxChannels, "at most 32 channels");
+  for (const auto* t : {&offsets, &entries, &weights}) TORCH_CHECK(t->is_contiguous(), "inputs must be contiguous");
+}
+
+}  // namespace
+
+// colour[p] = sum over row p of weights * values[entries]: a render from recorded contributions (the same
+// sum, in the same order, as forward()'s).
+torch::Tensor weighted_rows(torch::Tensor offsets, torch::Tensor entries, torch::Tensor weights, torch::Tensor values) {
+  values = values.contiguous();
+  check_rows(offsets, entries, weights, values);
+  const int64_t rows = offsets.size(0) - 1, C = values.size(1);
+  auto out = torch::empty({rows, C}, values.options());
+  AT_DISPATCH_FLOATING_TYPES(values.scalar_type(), "gt2gs_weighted_rows", [&] {
+    weighted_rows_impl<scalar_t>(offsets.data_ptr<int64_t>(), entries.data_ptr<int32_t>(), weights.data_ptr<scalar_t>(),
+                                 values.data_ptr<scalar_t>(), rows, C, out.data_ptr<scalar_t>());
+  });
+  return out;
+}
+
+// Gradient of weighted_rows() w.r.t. the values: grad_values[e] = sum of weight * grad[row] over e's
+// contributions (per-thread sums over fixed row ranges, then added: reproducible).
+torch::Tensor weighted_rows_backward(torch::Tensor offsets, torch::Tensor entries, torch::Tensor weights,
+                                     torch::Tensor grad, int64_t n_values) {
+  grad = grad.to(weights.dtype()).contiguous();
+  check_rows(offsets, entries, weights, grad);
+  const int64_t rows = offsets.size(0) - 1, C = grad.size(1);
+  const int n_threads = num_threads();
+  auto buffers = torch::zeros({n_threads, n_values, C}, grad.options());
+  AT_DISPATCH_FLOATING_TYPES(grad.scalar_type(), "gt2gs_weighted_rows_backward", [&] {
+    weighted_rows_backward_impl<scalar_t>(offsets.data_ptr<int64_t>(), entries.data_ptr<int32_t>(),
+                                          weights.data_ptr<scalar_t>(), grad.data_ptr<scalar_t>(), rows, C, n_values,
+                                          n_threads, buffers.data_ptr<scalar_t>());
+  });
+  return n_threads == 1 ? buffers[0] : buffers.sum(0);
+}
+
 // Backward of forward(): gradients w.r.t. means2d, conics, colors and opacities given the gradients
 // of the composited colour and of alpha = 1 - transmittance (without ``geometry`` only the colours',
 // the others zero).
@@ -557,4 +747,7 @@ PYBIND11_MODULE(TORCH_EXTENSION_NAME, m) {
   m.def("bin_tiles", &bin_tiles, "Sort Gaussian/tile pairs by tile, front to back");
   m.def("forward", &forward, "Composite Gaussians over 8x8 tiles");
   m.def("backward", &backward, "Gradients of forward()");
+  m.def("contributions", &contributions, "Per-pixel compositing weights of forward(), as CSR");
+  m.def("weighted_rows", &weighted_rows, "Per row, the weighted sum of the rows' values");
+  m.def("weighted_rows_backward", &weighted_rows_backward, "Gradient of weighted_rows() w.r.t. the values");
 }
