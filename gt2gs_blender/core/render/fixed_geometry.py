@@ -5,8 +5,9 @@ w_i = alpha_i T_i the compositing weight of the i-th Gaussian in front of it (th
 :func:`rasterization`). :func:`fix_geometry` records those weights once per camera (the CPU kernel's
 forward sweep) and :meth:`FixedGeometry.render` then renders any colours, and their gradient, as a
 weighted gather and scatter: the projection, depth sort, tile binning and both compositing sweeps of
-a render are skipped. The same sums in the same order as the kernel's forward, so the image is the
-rasterizer's to the bit and the colour gradient equal up to float rounding.
+a render are skipped. The same sums in the same order as the kernel's forward: given its colours the
+image is the rasterizer's to the bit; the SH colours are evaluated here by torch (within float rounding
+of the kernel's), and the colour gradient is summed in another order.
 """
 
 from __future__ import annotations
