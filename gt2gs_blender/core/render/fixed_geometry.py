@@ -86,7 +86,7 @@ def fix_geometry(scene: GaussianScene, cameras: Sequence[Camera], *, backend: st
             scene.quats.detach(),
             scene.scales.detach(),
             opacities,
-            opacities[:, None],
+            opacities[:, None],  # any one channel: the weights do not depend on the colours
             viewmats,
             ks,
             width,
