@@ -58,11 +58,12 @@ sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
 from common import parse_overrides
-from recognise_scenes import BenchScene, RunStart, layout_start, layout_surface, load_bench_scene, run_start
+from recognise_scenes import BenchScene, layout_start, layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.metrics import masked_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
+from gt2gs_blender.core.transfer.plan import RunPlan
 
 SHARED = ROOT.parent / "shared"
 TEXTURES = SHARED / "data" / "textures"
@@ -213,18 +214,18 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     original_stats = view_stats(original_views)
     original = score(original_stats, stats)
     print(f"[{name}] original scored in {time.perf_counter() - start:.1f} s", flush=True)
-    starts = {p: run_start(bench, run_config(p, args, bench, args.seeds[0])) for p in args.presets}
+    first_texture = texture_path(args.textures[0])  # the plans differ only in the texture, swapped in per texture
+    starts = {p: run_start(bench, run_config(p, args, bench, args.seeds[0]), first_texture) for p in args.presets}
     print(f"[{name}] run starts prepared in {time.perf_counter() - start:.1f} s", flush=True)
     # the preview each preset's results are compared with: its layout start, else the projection at its height
     references = {
         p: (f"{p}-layout-start" if len(args.presets) > 1 else "layout-start")
         if r.config.layout
-        else f"projected-{r.texture_height}"
+        else f"projected-{r.config.texture_height}"
         for p, r in starts.items()
     }
-    heights = list(
-        dict.fromkeys([*args.projected_heights, *(r.texture_height for r in starts.values() if not r.config.layout)])
-    )
+    sketched = [r.config.texture_height for r in starts.values() if not r.config.layout]
+    heights = list(dict.fromkeys([*args.projected_heights, *sketched]))
     folder = OUT / args.tag / name  # the results, whatever size measures them
     pictures = OUT / output_name(args) / name
     for texture in args.textures:
@@ -261,7 +262,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 continue
             t0 = time.perf_counter()
             variant = references[preset_name]
-            views = held_out_renders(layout_start(run, bench, texture_path(texture)), bench)
+            views = held_out_renders(layout_start(run, texture_path(texture)), bench)
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
             p["content_ssim"] = content_ssim(views, original_views)
@@ -349,14 +350,14 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             p: {
                 "reference": references[p],
                 "kind": "layout_start" if r.config.layout else "orientation_preview",
-                "texture_height": r.texture_height,
+                "texture_height": r.config.texture_height,
             }
             for p, r in starts.items()
         },
     }
 
 
-def preview_fields(distance: dict[str, float], reference: str, run: RunStart) -> dict[str, Any]:
+def preview_fields(distance: dict[str, float], reference: str, run: RunPlan) -> dict[str, Any]:
     return {
         "preview_gram": distance["gram"],
         "preview_gabor": distance["gabor"],

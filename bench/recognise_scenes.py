@@ -19,7 +19,7 @@ import hashlib
 import json
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,16 +31,13 @@ import torch
 
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
-from gt2gs_blender.core.transfer.content import content_and_hidden
 from gt2gs_blender.core.transfer.layout import (
-    LayoutFrame,
-    layout_frame,
     layout_images,
-    texture_height_for,
 )
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
+from gt2gs_blender.core.transfer.plan import RunPlan, plan_run
 from gt2gs_blender.core.transfer.texture import load_texture
-from gt2gs_blender.core.transfer.views import ViewSet, fit_cameras, render_views
+from gt2gs_blender.core.transfer.views import render_views
 
 SHARED = ROOT.parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -99,42 +96,21 @@ def load_bench_scene(name: str, resolution: int = 256) -> BenchScene:
     raise ValueError(f"unknown scene {name!r}; choose donut or fern")
 
 
-@dataclass
-class RunStart:
-    """What every run of one config on one scene starts from, the texture aside (the pipeline's prepare
-    stage, from the engine's own pieces): the views it optimises, its hidden splats, the layout's frame."""
-
-    config: TransferConfig
-    content: ViewSet | None
-    hidden: torch.Tensor | None
-    frame: LayoutFrame | None
-    texture_height: int
-    """The texture bank's height (``texture_repeats`` > 0 sets it from the frame, as the pipeline does)."""
+def run_start(bench: BenchScene, config: TransferConfig, texture: Path) -> RunPlan:
+    """The plan of a run with ``config`` on ``bench`` (the engine's own ``plan_run``, as a preview plans it: the
+    views are rendered only when the layout or ``texture_repeats`` needs them)."""
+    return plan_run(bench.scene, texture, bench.transfer_views, config, preview=True)
 
 
-def run_start(bench: BenchScene, config: TransferConfig) -> RunStart:
-    """The prepare stage of a run with ``config`` on ``bench`` (no colour transfer: the layout replaces the
-    colours); the views are rendered only when the layout or ``texture_repeats`` needs them."""
-    original = bench.scene.detach()
-    if not (config.layout or config.texture_repeats > 0):
-        return RunStart(config, None, None, None, config.texture_height)
-    cameras = fit_cameras(original, bench.transfer_views, config.resolution, config.n_views)
-    background = torch.tensor(config.background, dtype=original.dtype)
-    content, hidden = content_and_hidden(original, cameras, background, config)
-    frame = layout_frame(original, content, config)
-    height = texture_height_for(frame, content, config.n_scales) if config.texture_repeats > 0 else None
-    return RunStart(config, content, hidden, frame, height or config.texture_height)
-
-
-def layout_start(run: RunStart, bench: BenchScene, texture: Path) -> GaussianScene:
+def layout_start(run: RunPlan, texture: Path) -> GaussianScene:
     """The layout a run with ``layout`` on lays, without the optimisation's changes: the texture on the
     splats the run restyles, split to its detail (hidden ones keep their colours, as the result keeps them)."""
     assert run.content is not None and run.frame is not None and run.config.layout
-    return laid_out_start(bench.scene, load_texture(texture), run.content, run.hidden, run.frame, run.config)
+    return laid_out_start(replace(run, texture=load_texture(texture)))
 
 
 @torch.no_grad()
-def layout_surface(run: RunStart, bench: BenchScene, texture: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+def layout_surface(run: RunPlan, bench: BenchScene, texture: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """(RGB uint8 over the background, alpha) per held-out view: the layout as an exact surface shows it there
     (``layout_images`` on the original scene's depth, no splats): the most any splat result of this layout can
     show, so a rank the surface misses is the layout's (or the measure's), not the splats' or the optimisation's."""

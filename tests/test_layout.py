@@ -277,7 +277,7 @@ def test_a_transfer_with_the_layout_keeps_the_stripes_period_and_angle(shared, t
 def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     """The orientation preview with the layout on shows exactly what a run starts from (no steps)."""
     from gt2gs_blender.core.api import transfer
-    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+    from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam = wall(n=80, tilt_deg=20.0), front_camera(96)
     texture = stripes(period=32, size=128)
@@ -286,9 +286,9 @@ def test_the_layout_preview_is_the_run_s_starting_point(shared, tmp_path):
     )
     started = transfer(scene, texture, [cam], config).scene
     expected = render(started, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    preview = layout_preview(scene, texture, [cam], config, size=96)
-    assert preview.splats == len(started)
-    assert np.abs(preview.image.astype(np.float32) - expected).max() <= 1.0
+    shown = preview(scene, texture, [cam], config, size=96)
+    assert shown.splats == len(started)
+    assert np.abs(shown.image.astype(np.float32) - expected).max() <= 1.0
 
 
 def test_a_region_s_preview_is_the_region_run_s_starting_point(shared, tmp_path):
@@ -316,7 +316,7 @@ def test_the_preview_skips_the_splats_the_run_skips(shared, tmp_path):
     split), and the preview counts and shows the same scene as a zero-step run, not a split of them too."""
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.scene.gaussians import concat
-    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+    from gt2gs_blender.core.transfer.orientation_preview import preview
 
     front, cam = wall(n=80), front_camera(96)
     behind = GaussianScene.from_activated(
@@ -333,9 +333,9 @@ def test_the_preview_skips_the_splats_the_run_skips(shared, tmp_path):
     kept = (result.scene.means[:, 2] > 3.5).nonzero().squeeze(1)
     assert torch.equal(result.scene.subset(kept).means, behind.means)  # not split
     expected = render(result.scene, [cam], background=torch.ones(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    preview = layout_preview(scene, texture, [cam], config, size=96)
-    assert preview.splats == len(result.scene)
-    assert np.abs(preview.image.astype(np.float32) - expected).max() <= 1.0
+    shown = preview(scene, texture, [cam], config, size=96)
+    assert shown.splats == len(result.scene)
+    assert np.abs(shown.image.astype(np.float32) - expected).max() <= 1.0
 
 
 def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
@@ -398,7 +398,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     the light half all of it (none kept when off); the preview shows exactly the zero-step run, the detail
     split's children included."""
     from gt2gs_blender.core.api import transfer
-    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+    from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
     config = zero_step_config(shared, tmp_path, keep_shading=keep, shade_softness=0.0)
@@ -410,7 +410,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     assert float(colours[on_left].mean()) == pytest.approx(dark, abs=0.02)
     assert float(colours[on_right].mean()) == pytest.approx(1.0, abs=0.02)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    assert np.abs(layout_preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
+    assert np.abs(preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
     # the layout term's target is shaded the same way, per pixel from the view's own luminance
     views = render_views(scene, [cam], torch.zeros(3), "auto")
     (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, shaded=keep)
@@ -427,7 +427,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     luminance 0.5; the preview still shows exactly the zero-step run."""
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.transfer.layout import shade_width
-    from gt2gs_blender.core.transfer.orientation_preview import layout_preview
+    from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
     config = zero_step_config(shared, tmp_path, shade_softness=0.1)
@@ -440,7 +440,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     one_width = 0.35 + 0.65 * (0.2 + 0.6 * 0.1587) / 0.8  # a Gaussian's tail beyond one sigma: 15.87 %
     assert float(colours[(x + 0.1).abs() < 0.02].mean()) == pytest.approx(one_width, abs=0.03)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
-    assert np.abs(layout_preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
+    assert np.abs(preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
     views = render_views(scene, [cam], torch.zeros(3), "auto")
     frame = layout_frame(scene, views, config)
     (ideal,) = layout_images(views, white, frame, 0.0, True, shade_width(frame, config))

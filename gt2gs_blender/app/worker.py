@@ -150,22 +150,18 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
 
 
 def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
-    """Render the preview of the first view (what the run will lay on the scene, or on its region) as a PNG."""
+    """Render the preview of the first view (what the run will lay on the scene, or on its region) as a PNG,
+    from the run's own plan."""
     from ..core.scene.files import read_scene
     from ..core.transfer.orientation_preview import preview
-    from ..core.transfer.region import region_mask
-    from ..core.transfer.views import fit_cameras
     from .images import write_png
     from .jobs import load_region, read_texture
 
     scene = read_scene(spec.input)
     config = _config(spec)
-    loaded = None if spec.region is None else load_region(spec.region, len(scene))
-    region = region_mask(loaded, len(scene), scene.device)
+    region = None if spec.region is None else load_region(spec.region, len(scene))
     _prepare_kernel(config, lambda p: _send(events, p), cancel)
-    framed = scene if region is None else scene.subset(region)  # the views the run fits, as it fits them
-    cameras = fit_cameras(framed, _views(spec), config.resolution, config.n_views)
-    shown = preview(scene, read_texture(spec.texture), cameras, config, size=spec.preview_size, region=region)
+    shown = preview(scene, read_texture(spec.texture), _views(spec), config, size=spec.preview_size, region=region)
     write_png(spec.output, shown.image)
     events("done", output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
 

@@ -1,8 +1,8 @@
 """A quick picture of how the texture will lie on the scene at a chosen orientation angle.
 
-``preview`` is the one entry point (the worker's preview job and the run's preview agreement use it):
-with ``layout`` on it is ``layout_preview``, the texture laid out exactly as the run lays it; otherwise
-``orientation_preview``, the screen-space sketch below, at the texture size the run will use.
+``preview`` is the one entry point (the CLI, the API and the worker's preview job use it; the run's preview
+agreement calls ``show`` on its own plan): with ``layout`` on it shows the texture laid out exactly as the run
+lays it; otherwise ``orientation_preview``, the screen-space sketch below, at the texture size the run will use.
 
 The first view is rendered once; over the pixels the scene covers, the texture is laid out rotated
 by the angle (counter-clockwise on screen, the texture bank's convention) and scaled per depth
@@ -28,15 +28,14 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
-from .content import content_and_hidden
 from .detail import add_detail
-from .layout import LayoutFrame, lay_out, layout_frame, layout_shading, texture_height_for
+from .layout import lay_out, layout_shading
 from .metrics import LUMA
-from .region import assemble, region_mask, stylise_start, visible_rows
+from .plan import RunPlan, plan_run
+from .region import assemble
 from .shade import shading
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio
-from .views import ViewSet
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -112,91 +111,56 @@ class Preview:
 
 
 @torch.no_grad()
-def layout_preview(
-    scene: GaussianScene,
-    texture: np.ndarray | str | os.PathLike,
-    cameras: Sequence[Camera],
-    config: TransferConfig,
-    *,
-    size: int = 256,
-    region: torch.Tensor | np.ndarray | None = None,
-) -> Preview:
-    """The first of ``cameras`` showing the scene with the texture laid out exactly as a run with ``config``
-    (``layout`` on) and ``region`` lays it, split to its detail, without the optimisation's changes."""
-    image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
-    selected = region_mask(region, len(scene), scene.device)
-    views, hidden, frame = _run_frame(scene, cameras, config, selected)
-    laid = laid_out_start(scene, image, views, hidden, frame, config, selected)
-    cam = cameras[0].scaled(size / max(cameras[0].width, cameras[0].height))
-    out = render(laid, [cam], background=views.background, backend=config.backend)
-    return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
+def laid_out_start(plan: RunPlan) -> GaussianScene:
+    """The scene as a run of ``plan`` (``layout`` on) starts its optimisation: the texture laid out on the
+    restyled splats the views see, split to the texture's detail (the run splits before or after, into the
+    same children); hidden splats keep their colours, as the run keeps them."""
+    config, frame, texture = plan.config, plan.frame, plan.texture
+    work, region = plan.work, plan.region
+    shade = layout_shading(work, region, frame, config)
+    laid = lay_out(work, region, plan.content, texture, frame, config, shade)
+    if config.split_size > 0:
+        laid, region = add_detail(laid, laid.base_colors, region, plan.content, texture, frame, config, shade)
+    return assemble(laid, region, plan.start, plan.selected, plan.hidden, changed=True)
 
 
 @torch.no_grad()
-def laid_out_start(
-    scene: GaussianScene,
-    texture: np.ndarray,
-    views: ViewSet,
-    hidden: torch.Tensor | None,
-    frame: LayoutFrame,
-    config: TransferConfig,
-    selected: torch.Tensor | None = None,
-) -> GaussianScene:
-    """``scene`` as a run with ``config`` (``layout`` on) starts its optimisation: the texture laid out on the
-    ``selected`` splats (all when None) that ``views`` see, split to the texture's detail (the run splits
-    before or after, into the same children); ``hidden`` splats keep their colours, as the run keeps them."""
-    start = stylise_start(scene.detach(), selected, config.stylised_sh_degree)
-    hidden, region = visible_rows(selected, hidden)
-    work = start if hidden is None else start.subset(~hidden)
-    shade = layout_shading(work, region, frame, config)
-    laid = lay_out(work, region, views, texture, frame, config, shade)
-    if config.split_size > 0:
-        laid, region = add_detail(laid, laid.base_colors, region, views, texture, frame, config, shade)
-    return assemble(laid, region, start, selected, hidden, changed=True)
-
-
-def _run_frame(
-    scene: GaussianScene, cameras: Sequence[Camera], config: TransferConfig, selected: torch.Tensor | None
-) -> tuple[ViewSet, torch.Tensor | None, LayoutFrame]:
-    """The run's views of ``scene`` (``cameras`` at the run's resolution), the splats they all miss (None when
-    the run does not skip them) and the layout frame, sized on the ``selected`` splats (None: all) as the run
-    sizes it."""
-    background = torch.tensor(config.background, dtype=scene.dtype, device=scene.device)
-    run_cameras = [c.scaled(config.resolution / max(c.width, c.height)) for c in cameras]
-    views, hidden = content_and_hidden(scene.detach(), run_cameras, background, config)
-    return views, hidden, layout_frame(scene if selected is None else scene.subset(selected), views, config)
+def show(plan: RunPlan, *, size: int = 256) -> Preview:
+    """The first view of ``plan`` at longest side ``size``: with ``layout`` on, the scene laid out exactly as
+    the run starts (split to its detail, without the optimisation's changes); else the screen-space sketch
+    at the texture size and depth ratio the run uses."""
+    config, first = plan.config, plan.cameras[0]
+    if config.layout:
+        laid = laid_out_start(plan)
+        cam = first.scaled(size / max(first.width, first.height))
+        out = render(laid, [cam], background=plan.background, backend=config.backend)
+        return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
+    image = orientation_preview(
+        plan.original,
+        plan.texture,
+        first,
+        config.angle,
+        size=size,
+        resolution=config.resolution,
+        texture_height=config.texture_height,
+        n_groups=config.n_scales if config.depth_groups else 1,
+        depth_ratio=config.depth_ratio,
+        background=config.background,
+        backend=config.backend,
+    )
+    return Preview(image, len(plan.original))
 
 
 @torch.no_grad()
 def preview(
     scene: GaussianScene,
     texture: np.ndarray | str | os.PathLike,
-    cameras: Sequence[Camera],
+    cameras: Sequence[Camera] | int | None,
     config: TransferConfig,
     *,
     size: int = 256,
     region: torch.Tensor | np.ndarray | None = None,
 ) -> Preview:
-    """The first of ``cameras`` (the run's views): what a run with ``config`` will lay on ``scene`` (on its
-    ``region`` only, when given); with ``texture_repeats`` set, the sketch takes the texture size the run
-    derives from it."""
-    if config.layout:
-        return layout_preview(scene, texture, cameras, config, size=size, region=region)
-    height = config.texture_height
-    if config.texture_repeats > 0:
-        views, _, frame = _run_frame(scene, cameras, config, region_mask(region, len(scene), scene.device))
-        height = texture_height_for(frame, views, config.n_scales)
-    image = orientation_preview(
-        scene,
-        texture,
-        cameras[0],
-        config.angle,
-        size=size,
-        resolution=config.resolution,
-        texture_height=height,
-        n_groups=config.n_scales if config.depth_groups else 1,
-        depth_ratio=config.depth_ratio,
-        background=config.background,
-        backend=config.backend,
-    )
-    return Preview(image, len(scene))
+    """The first of ``cameras`` (or of the automatic views a count or None asks for): what a run with
+    ``config`` will lay on ``scene`` (on its ``region`` only, when given), from the run's own plan."""
+    return show(plan_run(scene, texture, cameras, config, region, preview=True), size=size)

@@ -18,26 +18,25 @@ import numpy as np
 import torch
 
 from ..cameras.camera import Camera
-from ..device import cpu_threads, resolve_device
+from ..device import cpu_threads
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor, load_feature_extractor, mixed_precision_dtype
 from ..progress import ProgressCallback, Tracker
 from ..scene.gaussians import GaussianScene
 from . import color_transfer
-from .bank import bank_depth_ratio, build_bank, nnfm_bank
+from .bank import build_bank, nnfm_bank
 from .config import TransferConfig
-from .content import content_and_hidden, content_degree
+from .content import content_degree
 from .detail import add_detail, split_for_detail
-from .gt2 import view_order
-from .layout import lay_out, layout_frame, layout_images, layout_shading, shade_width, texture_height_for
+from .layout import lay_out, layout_images, layout_shading, shade_width
 from .metrics import preview_ssim
-from .orientation_preview import preview
-from .region import assemble, region_mask, structure_changed, stylise_start, visible_rows
-from .skips import Plateau, redundant_views
+from .orientation_preview import show
+from .plan import RunPlan, plan_run
+from .region import assemble, structure_changed
+from .skips import Plateau
 from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
-from .texture import load_texture
 from .texture_bank import TextureBank, compact_bank
-from .views import ViewSet, fit_cameras, render_views, view_targets
+from .views import ViewSet, render_views, view_targets
 
 STAGE_WEIGHTS = {"prepare": 0.1, "bank": 0.15, "stylise": 0.65, "finish": 0.1}
 """Rough share of a run's time per stage, for the overall progress fraction and the ETA."""
@@ -53,12 +52,6 @@ class TransferResult:
 
 def _preview(image: torch.Tensor) -> np.ndarray:
     return (image.detach().clamp(0, 1) * 255 + 0.5).to(torch.uint8).cpu().numpy()
-
-
-def _load_texture(texture: np.ndarray | str | os.PathLike) -> np.ndarray:
-    if isinstance(texture, np.ndarray):
-        return np.ascontiguousarray(texture[..., :3], dtype=np.float32)
-    return load_texture(texture)
 
 
 def apply_color_transfer(
@@ -164,76 +157,54 @@ def _transfer(
     region: torch.Tensor | np.ndarray | None,
     tracker: Tracker,
 ) -> TransferResult:
-    """The body of :func:`transfer`."""
+    """The body of :func:`transfer`: plan the run, then prepare, build the bank, stylise and finish it."""
     torch.manual_seed(config.seed)
-    device = resolve_device(config.device)
-    asked = config  # before the run derives its texture height: what the preview was made with
-
     tracker.begin("prepare")
-    image = _load_texture(texture)
-    original = scene.detach().to(device)
-    selected = region_mask(region, len(original), device)
-    cameras = fit_cameras(
-        original if selected is None else original.subset(selected), views, config.resolution, config.n_views
-    )
-    background = torch.tensor(config.background, dtype=original.dtype, device=device)
-    content, hidden = content_and_hidden(original, cameras, background, config)
-    start = stylise_start(original, selected, config.stylised_sh_degree)
-    hidden, region = visible_rows(selected, hidden)
-    work = start if hidden is None else start.subset(~hidden)
-    frame = None
-    if config.layout or config.texture_repeats > 0:
-        # sized on every selected splat, hidden ones too, as the orientation preview sizes it
-        frame = layout_frame(original if selected is None else original.subset(selected), content, config)
+    plan = plan_run(scene, texture, views, config, region)
+    config, frame, image = plan.config, plan.frame, plan.texture
+    work, region = plan.work, plan.region
     # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
     shade = layout_shading(work, region, frame, config) if frame is not None and config.layout else None
     if config.color_transfer:
-        work = apply_color_transfer(work, content, image, region, config.backend)
+        work = apply_color_transfer(work, plan.content, image, region, config.backend)
     extractor = load_feature_extractor(
         config.features,
         config.weights_path,
-        device,
+        plan.device,
         scale=config.feature_scale,
-        autocast=mixed_precision_dtype(device, config.mixed_precision),
+        autocast=mixed_precision_dtype(plan.device, config.mixed_precision),
     )
-    dropped = (
-        redundant_views(cameras, content.depths, content.alphas, view_order(cameras), config.min_new_coverage)
-        if config.drop_views and len(cameras) > 2
-        else []
-    )
-    used = content.subset([v for v in range(len(cameras)) if v not in dropped]) if dropped else content
     n_work = len(work)
     laid_out = None
-    if frame is not None:
-        if config.texture_repeats > 0:
-            config = replace(config, texture_height=texture_height_for(frame, content, config.n_scales))
-        if config.layout:
-            if config.split_first and config.split_size > 0:
-                work, region, shade = split_for_detail(work, region, shade, frame, config)
-            work = lay_out(work, region, content, image, frame, config, shade)
-            projection = "box" if frame.projector is None else "view"
-            split = len(work) - n_work
-            laid_out = {"projection": projection, "repeat_world": frame.repeat, "splats": len(work), "split": split}
-    targets = view_targets(used, work, extractor, config, config.backend)
+    if frame is not None and config.layout:
+        if config.split_first and config.split_size > 0:
+            work, region, shade = split_for_detail(work, region, shade, frame, config)
+        work = lay_out(work, region, plan.content, image, frame, config, shade)
+        projected, split = config.layout_projection, len(work) - n_work
+        laid_out = {"projection": projected, "repeat_world": frame.repeat, "splats": len(work), "split": split}
+    targets = view_targets(plan.used, work, extractor, config, config.backend)
     if frame is not None and config.layout and config.lambda_layout > 0:
-        ideal = layout_images(used, image, frame, config.angle, shade is not None, shade_width(frame, config))
+        ideal = layout_images(plan.used, image, frame, config.angle, shade is not None, shade_width(frame, config))
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 
     tracker.begin("bank")
     # the labelled bank serves GT² matching and the texture-match metric of every variant
-    depth_ratio = bank_depth_ratio(used, config)
     labelled = (
-        build_bank(image, extractor, config, device, tracker, depth_ratio) if config.gt2 or config.evaluate else None
+        build_bank(image, extractor, config, plan.device, tracker, config.depth_ratio)
+        if config.gt2 or config.evaluate
+        else None
     )
-    bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, device)
+    bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, plan.device)
     matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
     tracker.end()
 
     tracker.begin("stylise")
     frozen = None if region is None else ~region
     carried = None if shade is None else {SHADE_ATTACHMENT: shade}
-    work, frozen, stats, attached = stylise(work, used, targets, matching, extractor, config, tracker, frozen, carried)
+    work, frozen, stats, attached = stylise(
+        work, plan.used, targets, matching, extractor, config, tracker, frozen, carried
+    )
     tracker.end()
 
     tracker.begin("finish")
@@ -241,33 +212,32 @@ def _transfer(
     if config.layout and config.split_size > 0 and not config.split_first:
         n_optimised = len(work)
         start_colours, shade = attached[COLOR_ATTACHMENT], attached.get(SHADE_ATTACHMENT)
-        work, restyled = add_detail(work, start_colours, restyled, content, image, frame, config, shade)
+        work, restyled = add_detail(work, start_colours, restyled, plan.content, image, frame, config, shade)
         laid_out.update(splats=len(work), split=len(work) - n_optimised)
     if config.color_transfer:
-        stylised_views = render_views(work, cameras, background, config.backend)
+        stylised_views = render_views(work, plan.cameras, plan.background, config.backend)
         work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
-    work = assemble(work, restyled, start, selected, hidden, structure_changed(stats) or len(work) != n_work)
+    changed = structure_changed(stats) or len(work) != n_work
+    work = assemble(work, restyled, plan.start, plan.selected, plan.hidden, changed)
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
-        metrics = _evaluate(work, content, used, targets, labelled, extractor, config)
-        shown = preview(
-            original, image, cameras, asked, size=max(cameras[0].width, cameras[0].height), region=selected
-        ).image
-        metrics["preview_ssim"] = preview_ssim(work, shown, cameras[0], background, config.backend)
+        metrics = _evaluate(work, plan.content, plan.used, targets, labelled, extractor, config)
+        shown = show(plan, size=max(plan.cameras[0].width, plan.cameras[0].height)).image
+        metrics["preview_ssim"] = preview_ssim(work, shown, plan.cameras[0], plan.background, config.backend)
     tracker.end()
-    report = _report(config, tracker, work, cameras, extractor, bank, metrics, device)
+    report = _report(plan, tracker, work, extractor, bank, metrics)
     report["stylise"] = {
         **asdict(stats),
-        "n_gaussians_start": len(original),
-        "region": None if selected is None else int(selected.sum()),
+        "n_gaussians_start": len(plan.original),
+        "region": None if plan.selected is None else int(plan.selected.sum()),
     }
     report["skips"] = {
-        "hidden": None if hidden is None else int(hidden.sum()),
-        "sh_degree": [original.sh_degree, content_degree(original, config)],
+        "hidden": None if plan.hidden is None else int(plan.hidden.sum()),
+        "sh_degree": [plan.original.sh_degree, content_degree(plan.original, config)],
         "bank_angles": len(bank.angles),
         "bank_rows_matched": len(matching),
         "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
-        "dropped_views": dropped,
+        "dropped_views": plan.dropped,
         "layout": laid_out,
         "plateau_skipped": dict(stats.plateau_skipped),
     }
@@ -324,24 +294,27 @@ def _weights_folder(path: str | None) -> str | None:
 
 
 def _report(
-    config: TransferConfig,
+    plan: RunPlan,
     tracker: Tracker,
     scene: GaussianScene,
-    cameras: Sequence[Camera],
     extractor: FeatureExtractor,
     bank: TextureBank,
     metrics: dict | None,
-    device: torch.device,
 ) -> dict:
+    """The run's report: timings, sizes, the device and network, the metrics, and the settings as asked
+    (``asked``) and as run (``config``, every automatic value resolved; ``resolved`` lists those)."""
+    cameras = plan.cameras
     return {
         "seconds": time.perf_counter() - tracker.start,
         "stage_seconds": dict(tracker.seconds),
         "n_gaussians": len(scene),
         "n_views": len(cameras),
         "image_size": [cameras[0].width, cameras[0].height],
-        "device": str(device),
+        "device": str(plan.device),
         "weights": dict(extractor.info),
         "bank": {"features": len(bank), "scales": list(bank.scales), "angles": len(bank.angles)},
         "metrics": metrics,
-        "config": config.to_dict(),
+        "asked": plan.asked.to_dict(),
+        "resolved": plan.resolved(),
+        "config": plan.config.to_dict(),
     }
