@@ -15,7 +15,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.transfer.config import TransferConfig, _python_type
+from gt2gs_blender.core.transfer.config import TransferConfig, setting_type
 
 
 def random_scene(n: int, degree: int = 3, seed: int = 0) -> GaussianScene:
@@ -46,7 +46,7 @@ def parse_overrides(pairs: list[str]) -> dict[str, Any]:
         if text == "None" and "None" in annotation:
             out[name] = None
             continue
-        kind = _python_type(annotation)
+        kind = setting_type(name)
         if kind is bool:
             if text.lower() not in ("1", "0", "true", "false", "yes", "no", "on", "off"):
                 raise SystemExit(f"--set {pair!r}: not a yes/no value")

@@ -8,8 +8,9 @@ from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.app.cli.options import config_from_args, flag
 from gt2gs_blender.core.features.weights import PREFERENCES
 from gt2gs_blender.core.render import BACKENDS
-from gt2gs_blender.core.transfer.config import PARTS, SETTINGS, TransferConfig, user_settings
+from gt2gs_blender.core.transfer.config import SETTINGS, TransferConfig, user_settings
 from gt2gs_blender.core.transfer.presets import PRESETS
+from gt2gs_blender.core.transfer.setting import PARTS
 
 
 def transfer_help(capsys) -> str:

@@ -17,8 +17,9 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from ..core.transfer.config import DEGREES, IN_SCENE, Setting, user_settings
+from ..core.transfer.config import user_settings
 from ..core.transfer.presets import DEFAULT_PRESET, PRESETS
+from ..core.transfer.setting import DEGREES, IN_SCENE, Setting
 
 DEFAULTS = PRESETS[DEFAULT_PRESET]
 ANGLE_DECIMALS = 4

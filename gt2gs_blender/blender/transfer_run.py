@@ -22,8 +22,8 @@ import bpy.utils.previews
 import numpy as np
 
 from ..core.progress import format_eta
-from ..core.transfer.config import IN_PREFERENCES, IN_SCENE
 from ..core.transfer.presets import GPU_PRESETS
+from ..core.transfer.setting import IN_PREFERENCES, IN_SCENE
 from . import addon, machine, properties, splats, textures, views
 from .job import CANCELLED, DONE, ERROR, Job, JobStatus
 

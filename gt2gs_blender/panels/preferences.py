@@ -13,7 +13,8 @@ from bpy.props import EnumProperty
 
 from ..app import deps
 from ..blender import addon, machine, properties
-from ..core.transfer.config import IN_PREFERENCES, user_settings
+from ..core.transfer.config import user_settings
+from ..core.transfer.setting import IN_PREFERENCES
 from ..operators import dependencies
 from ..operators import machine as machine_ops
 from .sections import draw_setting

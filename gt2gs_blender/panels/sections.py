@@ -16,7 +16,8 @@ from typing import Any
 import bpy
 
 from ..blender import machine, textures, transfer_run, views
-from ..core.transfer.config import IN_SCENE, MAX_DEPTH_RATIO, PARTS, SETTINGS, user_settings
+from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
+from ..core.transfer.setting import IN_SCENE, PARTS
 from .sidebar import CATEGORY
 
 SECTIONS = ("Texture", "Views", "Quality", "Advanced")

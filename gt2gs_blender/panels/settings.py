@@ -11,8 +11,8 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, PointerProperty, StringProperty
 
 from ..blender import properties, splats
-from ..core.transfer.config import IN_SCENE
 from ..core.transfer.presets import DEFAULT_PRESET, GPU_PRESETS, PRESET_HELP, PRESETS
+from ..core.transfer.setting import IN_SCENE
 
 
 def preset_item(name: str) -> tuple[str, str, str]:

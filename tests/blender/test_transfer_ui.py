@@ -462,7 +462,8 @@ def test_preview_preset_on_the_shared_donut(fresh, donut, monkeypatch):
 
 
 def test_every_setting_has_a_blender_property_unless_internal(fresh):
-    from gt2gs_blender.core.transfer.config import IN_PREFERENCES, IN_SCENE, SETTINGS
+    from gt2gs_blender.core.transfer.config import SETTINGS
+    from gt2gs_blender.core.transfer.setting import IN_PREFERENCES, IN_SCENE
     from gt2gs_blender.panels.preferences import GT2GS_AP_preferences
 
     scene_props = fresh.types.Scene.bl_rna.properties["gt2gs"].fixed_type.properties
@@ -500,7 +501,8 @@ def test_the_orientation_is_an_angle_property_in_degrees_for_the_engine(fresh):
 
 
 def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
-    from gt2gs_blender.core.transfer.config import IN_SCENE, PARTS, user_settings
+    from gt2gs_blender.core.transfer.config import user_settings
+    from gt2gs_blender.core.transfer.setting import IN_SCENE, PARTS
     from gt2gs_blender.panels import sections
 
     assert set(PARTS) <= set(sections.SECTION_OF_PART) and sections.section_of("a new part") == "Advanced"

@@ -12,8 +12,9 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ...core.transfer.config import PARTS, Setting, TransferConfig, user_settings
+from ...core.transfer.config import TransferConfig, user_settings
 from ...core.transfer.presets import DEFAULT_PRESET, GPU_PRESETS, PRESET_HELP, PRESETS, paper_value, preset
+from ...core.transfer.setting import PARTS, Setting
 from .args import color
 
 METAVARS = {"px": "PX", "°": "DEG", "steps": "N"}
@@ -86,6 +87,4 @@ def config_from_args(args: argparse.Namespace, **extra: Any) -> TransferConfig:
     given = {name: str(v) if isinstance(v, Path) else v for name, v in given.items()}
     if given.get("background") is not None:
         given["background"] = tuple(given["background"])
-    if given.get("texture_height") is not None and given.get("texture_repeats") is None:
-        given["texture_repeats"] = 0.0  # a size in pixels asked for is the size used
     return preset(args.preset, **given, **extra)

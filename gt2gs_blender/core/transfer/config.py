@@ -9,9 +9,23 @@ preset, not written again.
 
 from __future__ import annotations
 
+import types
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field, fields, replace
-from typing import Any
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+
+from .setting import (
+    DEGREES,
+    IN_PREFERENCES,
+    PARTS,
+    Device,
+    FeatureNetwork,
+    Projection,
+    Rasterizer,
+    Setting,
+    Switch,
+    setting,
+)
 
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
@@ -19,51 +33,6 @@ the farthest group's texture stays half the nearest's size (128 px at the defaul
 FORWARD_SPREAD_DEG = 45.0
 """Lay Out Texture's automatic projection is View, and Texture Moves Splats is on, when every view looks
 within this angle of the views' mean direction (a capture seen from the front); else Box, and off."""
-SWITCH = ("auto", "on", "off")
-"""The choices of a setting whose automatic value depends on the scene's views."""
-
-PARTS = {
-    "views": "Views",
-    "texture": "Texture",
-    "stylise": "Stylisation",
-    "gt2": "GT² Orientation",
-    "afcm": "Adaptive Control (AFCM)",
-    "gpb": "Geometry Preservation",
-    "speed": "Speed",
-    "machine": "Machine",
-}
-"""The parts of a run the settings belong to, in the order the CLI's help and Blender's panels show them."""
-
-IN_SCENE, IN_PREFERENCES = "scene", "preferences"
-DEGREES = "°"
-"""The unit of angle settings (Blender shows them as angle properties, which hold radians)."""
-
-
-@dataclass(frozen=True)
-class Setting:
-    """What a setting means to a user, and where the front ends offer it."""
-
-    label: str
-    help: str
-    part: str
-    unit: str = ""
-    min: float | None = None
-    max: float | None = None
-    soft_max: float | None = None
-    choices: tuple[str, ...] = ()
-    flag: str | None = None
-    """The CLI flag when it is not ``--field-name``."""
-    switch: tuple[str, Any, str] | None = None
-    """An extra CLI switch (flag, value it sets, help), kept for a common use of the setting."""
-    blender: str = IN_SCENE
-    """Where Blender offers it: the scene's GT² settings, or the add-on preferences (machine settings)."""
-    internal: bool = False
-    """Set by the program, not by users: no CLI flag, no Blender property."""
-
-
-def setting(default: Any, label: str, help: str, part: str, **meta: Any) -> Any:
-    """A dataclass field with its :class:`Setting` (``help`` is the one-line tooltip)."""
-    return field(default=default, metadata={"setting": Setting(label, help, part, **meta)})
 
 
 @dataclass(frozen=True)
@@ -108,14 +77,14 @@ class TransferConfig:
         "and angle), so planks, bricks and cells show; off: start from the object's own colours, as the paper does",
         "texture",
     )
-    layout_projection: str = setting(
+    layout_projection: Projection = setting(
         "auto",
         "Projection",
         "How Lay Out Texture puts the texture on the scene: Box wraps it around an object seen from all "
         "sides; View throws it from the first view like a slide projector (a capture seen from the front); "
         f"Auto: View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",
         "texture",
-        choices=("auto", "box", "view"),
+        choices=get_args(Projection),
     )
     keep_shading: bool = setting(
         True,
@@ -279,7 +248,7 @@ class TransferConfig:
         "does not trace its outline; the texture comes out weaker",
         "stylise",
     )
-    stylise_geometry: str = setting(
+    stylise_geometry: Switch = setting(
         "auto",
         "Texture Moves Splats",
         "Let the texture loss move, scale and turn the splats too, as the paper's code does: bolder texture, "
@@ -287,7 +256,7 @@ class TransferConfig:
         f"{FORWARD_SPREAD_DEG:g}° of the views' mean direction), where near and far surfaces would carry "
         "the texture twice; off for an object seen from all sides, which keeps its outline",
         "stylise",
-        choices=SWITCH,
+        choices=get_args(Switch),
     )
     densify: bool = setting(True, "Densify", "Add splats where the texture needs detail", "stylise")
     densify_every: int = setting(
@@ -438,13 +407,13 @@ class TransferConfig:
         "machine",
         blender=IN_PREFERENCES,
     )
-    features: str = setting(
+    features: FeatureNetwork = setting(
         "auto",
         "Feature Network",
         "Which feature network to use (auto: the best one found)",
         "machine",
-        choices=("auto", "vgg16_relu3", "vgg19_norm_relu3"),
         blender=IN_PREFERENCES,
+        choices=get_args(FeatureNetwork),
     )
     weights_path: str | None = setting(
         None,
@@ -454,13 +423,13 @@ class TransferConfig:
         flag="--weights",
         blender=IN_PREFERENCES,
     )
-    device: str = setting(
+    device: Device = setting(
         "auto",
         "Device",
         "Where the run computes: auto = CUDA when available",
         "machine",
-        choices=("auto", "cpu", "cuda"),
         blender=IN_PREFERENCES,
+        choices=get_args(Device),
     )
     threads: int = setting(
         0,
@@ -471,13 +440,13 @@ class TransferConfig:
         soft_max=64,
         blender=IN_PREFERENCES,
     )
-    backend: str = setting(
+    backend: Rasterizer = setting(
         "auto",
         "Rasterizer",
         "Rasterizer backend (auto = the fastest available)",
         "machine",
-        choices=("auto", "torch", "cpu", "gsplat"),
         blender=IN_PREFERENCES,
+        choices=get_args(Rasterizer),
     )
     cache_dir: str | None = setting(
         None,
@@ -533,21 +502,24 @@ class TransferConfig:
             raise ValueError(f"split_budget must be >= 1 (a multiple of the object's splats), got {self.split_budget}")
         if self.hidden_threshold < 0:
             raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
-        for name in ("device", "features", "backend", "stylise_geometry"):
-            choices = SETTINGS[name].choices
-            if getattr(self, name) not in choices:
-                raise ValueError(f"{name} must be one of {', '.join(choices)}, got {getattr(self, name)!r}")
+        for name, meta in SETTINGS.items():
+            if meta.choices and getattr(self, name) not in meta.choices:
+                raise ValueError(f"{name} must be one of {', '.join(meta.choices)}, got {getattr(self, name)!r}")
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
     def with_overrides(self, **overrides: Any) -> TransferConfig:
-        """A copy with the given fields changed (None values are ignored: 'not given')."""
+        """A copy with the given fields changed (None values are ignored: 'not given'). A texture height given
+        without a repeat count is the size used: it sets ``texture_repeats`` to 0, its "use the size" value."""
         known = {f.name for f in fields(self)}
         unknown = set(overrides) - known
         if unknown:
             raise ValueError(f"unknown transfer settings: {', '.join(sorted(unknown))}")
-        return replace(self, **{k: v for k, v in overrides.items() if v is not None})
+        given = {k: v for k, v in overrides.items() if v is not None}
+        if "texture_height" in given and "texture_repeats" not in given:
+            given["texture_repeats"] = 0.0
+        return replace(self, **given)
 
 
 SETTINGS: dict[str, Setting] = {f.name: f.metadata["setting"] for f in fields(TransferConfig)}
@@ -557,17 +529,20 @@ SETTINGS: dict[str, Setting] = {f.name: f.metadata["setting"] for f in fields(Tr
 def user_settings(where: str | None = None) -> Iterator[tuple[str, Setting, type]]:
     """(name, setting, Python type) of the settings users set, in part order; ``where``: only those Blender
     offers there (IN_SCENE or IN_PREFERENCES)."""
-    types = {f.name: f.type for f in fields(TransferConfig)}
     for part in PARTS:
         for name, meta in SETTINGS.items():
             if meta.part == part and not meta.internal and (where is None or meta.blender == where):
-                yield name, meta, _python_type(types[name])
+                yield name, meta, setting_type(name)
 
 
-def _python_type(annotation: Any) -> type:
-    """The value type of a field annotation (a string under ``from __future__ import annotations``)."""
-    text = str(annotation)
-    for name, kind in (("tuple", tuple), ("bool", bool), ("int", int), ("float", float), ("str", str)):
-        if text.startswith(name):
-            return kind
-    raise TypeError(f"unsupported setting type {annotation!r}")
+def setting_type(name: str) -> type:
+    """The value type of setting ``name``: bool, int, float, str (a choice's words, a path) or tuple."""
+    annotation = _HINTS[name]
+    if get_origin(annotation) is Literal:
+        return type(get_args(annotation)[0])
+    if get_origin(annotation) in (Union, types.UnionType):  # an optional path: str | None
+        annotation = next(arg for arg in get_args(annotation) if arg is not type(None))
+    return get_origin(annotation) or annotation
+
+
+_HINTS = get_type_hints(TransferConfig)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
+from typing import get_args
 
 import cv2
 import numpy as np
@@ -53,6 +54,7 @@ from ..scene.inria import SH_C0
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig
 from .metrics import LUMA
+from .setting import Projection
 from .shade import layout_shade, shading, spatial_blur
 from .texture_bank import bank_scales
 from .views import ViewSet
@@ -76,7 +78,7 @@ EXTENT_QUANTILE = 0.02
 NEAREST_PROJECTOR_DEPTH = 0.05
 """Points nearer the projector than this share of its nearest group's depth (or behind it) read the texture
 as if at that depth, instead of an unbounded magnification."""
-PROJECTIONS = ("auto", "box", "view")
+PROJECTIONS = get_args(Projection)
 
 
 @dataclass(frozen=True)
