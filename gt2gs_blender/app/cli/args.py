@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
+from ...core.atomic import Named, require_input
+from ...core.scene.files import SOG_META
 from ...core.transfer.config import SETTINGS
 
 
@@ -50,6 +53,16 @@ def color(text: str) -> tuple[float, float, float]:
 def up(text: str) -> str | tuple[float, float, float]:
     """'auto' or an 'x,y,z' vector."""
     return "auto" if text == "auto" else floats(text, 3, "'auto' or a vector x,y,z")  # type: ignore[return-value]
+
+
+def scene_input(path: Path | None) -> list[Named]:
+    """The scene as inputs an output must not overwrite (an unpacked SOG's ``meta.json`` brings its folder),
+    after refusing one that is neither a file nor a folder."""
+    if path is None:
+        return []
+    require_input("scene", path, folder=True)
+    folder = [("scene's folder", path.parent)] if path.name == SOG_META else []
+    return [("scene", path), *folder]
 
 
 def scene_options() -> argparse.ArgumentParser:

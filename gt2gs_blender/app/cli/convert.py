@@ -7,8 +7,9 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from ...core.atomic import check_outputs
 from ...core.scene.files import FORMATS, WRITERS, output_format, read_splats, write_splats
-from .args import scene_options
+from .args import scene_input, scene_options
 
 
 def add_convert_command(commands: Any, debug: argparse.ArgumentParser) -> None:
@@ -30,6 +31,7 @@ def add_convert_command(commands: Any, debug: argparse.ArgumentParser) -> None:
 def cmd_convert(args: argparse.Namespace) -> None:
     """Read IN, write OUT, and say what the output format dropped."""
     fmt = output_format(args.output, args.format)
+    check_outputs([("OUT", args.output)], scene_input(args.scene))
     scene = read_splats(args.scene, drop_invalid=args.drop_invalid)
     for note in write_splats(args.output, scene, fmt):
         warnings.warn(f"{args.output}: {note}", stacklevel=1)

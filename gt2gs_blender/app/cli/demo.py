@@ -12,13 +12,14 @@ from typing import Any
 import numpy as np
 import torch
 
+from ...core.atomic import all_or_nothing, check_outputs, require_input
 from ...core.features.weights import ENV_VAR
 from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import positive_int, render_options, scene_options
+from .args import positive_int, render_options, scene_input, scene_options
 from .options import add_setting_arguments, config_from_args
 from .transfer import GIVEN
 
@@ -57,29 +58,30 @@ def add_demo_command(commands: Any, debug: argparse.ArgumentParser) -> None:
 
 def cmd_demo(args: argparse.Namespace) -> None:
     """Texture-transfer the demo scene and write the stylised PLY, a before/after strip and the report."""
-    scene, source = _demo_scene(args.scene, args.drop_invalid)
+    scene_path = args.scene or (SHARED_DONUT if SHARED_DONUT.is_file() else None)
     texture = args.texture or (DEMO_TEXTURE if DEMO_TEXTURE.is_file() else None)
+    if texture is not None:
+        require_input("texture", texture)
+    files = [args.out / name for name in ("stylised.ply", "before_after.png", "report.json")]
+    check_outputs(
+        [(f"--out's {path.name}", path) for path in files],
+        [*scene_input(scene_path), ("texture", texture)],
+        new_folders=[args.out],
+    )
+    scene, source = _demo_scene(scene_path, args.drop_invalid)
     print(f"scene: {source} ({len(scene):,} Gaussians)")
     print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
     image = stripes_texture() if texture is None else load_texture(texture)
     if args.weights_path is None and not os.environ.get(ENV_VAR) and SHARED_WEIGHTS.is_dir():
         args.weights_path = str(SHARED_WEIGHTS)
     config = config_from_args(args)
-    args.out.mkdir(parents=True, exist_ok=True)
-    with TerminalProgress("demo") as bar:
-        result = run_transfer(
-            scene,
-            image,
-            None,
-            config,
-            args.out / "stylised.ply",
-            report=args.out / "report.json",
-            progress=bar,
-            scene_name=source,
-        )
-    write_before_after(args.out / "before_after.png", scene, result.scene, image)
+    stylised, strip, report = files
+    with all_or_nothing(files, new_folders=[args.out]):
+        with TerminalProgress("demo") as bar:
+            result = run_transfer(scene, image, None, config, stylised, report=report, progress=bar, scene_name=source)
+        write_before_after(strip, scene, result.scene, image)
     print(summary(result.report))
-    print(f"wrote {args.out / 'stylised.ply'}, {args.out / 'before_after.png'} and {args.out / 'report.json'}")
+    print(f"wrote {stylised}, {strip} and {report}")
 
 
 def stripes_texture(size: int = 256, period: int = 24) -> np.ndarray:
@@ -90,11 +92,9 @@ def stripes_texture(size: int = 256, period: int = 24) -> np.ndarray:
 
 
 def _demo_scene(path: Path | None, drop_invalid: bool) -> tuple[GaussianScene, str]:
-    """The scene to show: the given file, else the shared donut, else a generated torus."""
+    """The scene to show: the given file (or the shared donut), else a generated torus."""
     if path is not None:
         return read_scene(path, drop_invalid=drop_invalid), str(path)
-    if SHARED_DONUT.is_file():
-        return read_scene(SHARED_DONUT, drop_invalid=drop_invalid), str(SHARED_DONUT)
     return torus_scene(), f"a generated torus (the shared donut is not at {SHARED_DONUT})"
 
 

@@ -6,7 +6,8 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from ...core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, fit_llff
+from ...core.atomic import Named, all_or_nothing, check_outputs, require_input
+from ...core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, FitConfig, FitReport, fit_llff, inria_files
 from ..progress import TerminalProgress
 from .args import positive_int, render_options
 
@@ -60,8 +61,11 @@ def add_fit_command(commands: Any, debug: argparse.ArgumentParser) -> None:
 
 def cmd_fit(args: argparse.Namespace) -> None:
     """Fit an LLFF capture, print the held-out scores and time, optionally write a JSON report."""
+    require_input("LLFF folder", args.scene, folder=True)
+    outputs, folders = fit_outputs(args.out, args.iterations, args.report)
+    check_outputs(outputs, [("LLFF folder", args.scene)], new_folders=folders)
     config = FitConfig(iterations=args.iterations, background=args.background, backend=args.backend)
-    with TerminalProgress("fit") as bar:
+    with all_or_nothing([path for _, path in outputs], new_folders=folders), TerminalProgress("fit") as bar:
         report = fit_llff(
             args.scene,
             args.out,
@@ -71,9 +75,16 @@ def cmd_fit(args: argparse.Namespace) -> None:
             sh_degree=args.sh_degree,
             progress=bar,
         )
-    if args.report is not None:
-        report.write_json(args.report)
+        if args.report is not None:
+            report.write_json(args.report)
     print(_fit_summary(report, args.out))
+
+
+def fit_outputs(out_dir: Path, iterations: int, report: Path | None) -> tuple[list[Named], list[Path]]:
+    """The files ``fit`` writes (the INRIA layout, the report) and the folders it makes for them."""
+    files = inria_files(out_dir, iterations)
+    outputs = [(f"--out's {path.relative_to(out_dir)}", path) for path in files]
+    return outputs + ([("--report", report)] if report is not None else []), [out_dir, files[0].parent]
 
 
 def _fit_summary(report: FitReport, out_dir: Path) -> str:

@@ -8,6 +8,7 @@ import re
 from pathlib import Path
 from typing import Any
 
+from ...core.atomic import require_input
 from ...core.scene.files import COMPRESSED_PLY, FORMATS, PLY, detect_format, read_scene
 from ...core.scene.gaussians import GaussianScene
 from ...core.scene.inria import NORMAL_NAMES
@@ -34,6 +35,7 @@ def add_info_command(commands: Any, debug: argparse.ArgumentParser) -> None:
 
 def cmd_info(args: argparse.Namespace) -> None:
     """Print what a PLY holds, as text or JSON."""
+    require_input("scene", args.scene, folder=True)
     info = scene_info(args.scene, drop_invalid=args.drop_invalid)
     print(json.dumps(info, indent=2) if args.json else _format_info(info))
 

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from ...core.atomic import Named, all_or_nothing, atomic_write, check_outputs, require_input
 from ...core.cameras.camera import Camera
 from ...core.cameras.cameras_json import save_cameras_json
 from ...core.cameras.files import load_views
@@ -25,7 +26,7 @@ from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
 from ..images import write_png
 from ..progress import TerminalProgress
-from .args import positive_float, positive_int, render_options, scene_options, up
+from .args import positive_float, positive_int, render_options, scene_input, scene_options, up
 
 BATCH = 4
 """Cameras rendered per rasterizer call: enough to amortise the per-call set-up, little memory."""
@@ -33,6 +34,8 @@ BATCH = 4
 
 DEPTH_MIN_ALPHA = 0.1
 """Pixels less opaque than this have no meaningful depth; they are 0 in depth PNGs."""
+
+CAMERAS_FILE, DEPTH_RANGES_FILE = "cameras.json", "depth_ranges.json"
 
 
 def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
@@ -88,31 +91,60 @@ class RenderReport:
 
 def cmd_render(args: argparse.Namespace) -> None:
     """Render a scene from given or generated cameras into a folder of PNGs."""
+    inputs = scene_input(args.scene)
+    if args.cameras is not None:
+        require_input("cameras", args.cameras, folder=True)
+        inputs.append(("cameras", args.cameras))
+    given = _given_cameras(args)
+    outputs = render_outputs(args.output, len(given) if given is not None else args.views or 8, args.depth)
+    check_outputs(outputs, inputs, new_folders=[args.output])
     scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
-    cameras = _cameras(args, scene)
-    report = render_to_dir(
-        scene,
-        cameras,
-        args.output,
-        background=args.background,
-        backend=args.backend,
-        device=args.device,
-        depth=args.depth,
-    )
+    cameras = given if given is not None else _generated_cameras(args, scene)
+    with all_or_nothing([path for _, path in outputs], new_folders=[args.output]):
+        report = render_to_dir(
+            scene,
+            cameras,
+            args.output,
+            background=args.background,
+            backend=args.backend,
+            device=args.device,
+            depth=args.depth,
+        )
     print(_summary(report, cameras, args.output))
 
 
-def _cameras(args: argparse.Namespace, scene: GaussianScene) -> list[Camera]:
-    """The cameras to render: loaded (optionally rescaled) or generated around the scene."""
-    if args.cameras is not None:
-        if args.width or args.height:
-            raise GT2GSError("--width/--height size generated views; with --cameras use --scale")
-        cameras = load_views(args.cameras)
-        return [c.scaled(args.scale) for c in cameras] if args.scale else cameras
-    if args.scale:
-        raise GT2GSError("--scale resizes --cameras; for generated views use --width/--height")
+def render_outputs(out_dir: Path, count: int, depth: bool) -> list[Named]:
+    """Every file ``render_to_dir`` writes for ``count`` cameras, named for messages."""
+    names = [*(_view_name(i) for i in range(count)), CAMERAS_FILE]
+    if depth:
+        names += [*(_depth_name(i) for i in range(count)), DEPTH_RANGES_FILE]
+    return [(f"the rendered {name}", out_dir / name) for name in names]
+
+
+def _given_cameras(args: argparse.Namespace) -> list[Camera] | None:
+    """The cameras from --cameras (optionally rescaled); None when views are to be generated."""
+    if args.cameras is None:
+        if args.scale:
+            raise GT2GSError("--scale resizes --cameras; for generated views use --width/--height")
+        return None
+    if args.width or args.height:
+        raise GT2GSError("--width/--height size generated views; with --cameras use --scale")
+    cameras = load_views(args.cameras)
+    return [c.scaled(args.scale) for c in cameras] if args.scale else cameras
+
+
+def _generated_cameras(args: argparse.Namespace, scene: GaussianScene) -> list[Camera]:
+    """Views generated around the scene."""
     width = args.width or 512
     return auto_views(scene, args.views or 8, width=width, height=args.height or width, kind=args.kind, up=args.up)
+
+
+def _view_name(i: int) -> str:
+    return f"view_{i:03d}.png"
+
+
+def _depth_name(i: int) -> str:
+    return f"depth_{i:03d}.png"
 
 
 def render_to_dir(
@@ -135,7 +167,7 @@ def render_to_dir(
     backend = resolve_backend(backend, torch_device)
     setup_s = time.perf_counter() - start
     scene = scene.to(torch_device)
-    images = [out_dir / f"view_{i:03d}.png" for i in range(len(cameras))]
+    images = [out_dir / _view_name(i) for i in range(len(cameras))]
     depth_ranges: dict[str, list[float] | None] = {}
     start = time.perf_counter()
     bar = TerminalProgress("render") if len(cameras) > BATCH else None
@@ -147,8 +179,8 @@ def render_to_dir(
                 write_png(images[i], _to_rgb8(out.colors[j]))
                 if depth:
                     encoded, near_far = _encode_depth(out.depths[j], out.alphas[j])
-                    write_png(out_dir / f"depth_{i:03d}.png", encoded)
-                    depth_ranges[f"depth_{i:03d}.png"] = near_far
+                    write_png(out_dir / _depth_name(i), encoded)
+                    depth_ranges[_depth_name(i)] = near_far
             done += len(batch)
             if bar is not None:
                 bar(
@@ -156,9 +188,9 @@ def render_to_dir(
                 )
     if bar is not None:
         bar.close()
-    save_cameras_json(out_dir / "cameras.json", cameras)
+    save_cameras_json(out_dir / CAMERAS_FILE, cameras)
     if depth:
-        _write_depth_ranges(out_dir / "depth_ranges.json", depth_ranges)
+        _write_depth_ranges(out_dir / DEPTH_RANGES_FILE, depth_ranges)
     return RenderReport(images, backend, setup_s, time.perf_counter() - start)
 
 
@@ -195,7 +227,7 @@ def _write_depth_ranges(path: Path, ranges: dict[str, list[float] | None]) -> No
         "encoding": f"0 = empty (alpha < {DEPTH_MIN_ALPHA}); 1..65535 = near..far, linear in camera z",
         "near_far": ranges,
     }
-    path.write_text(json.dumps(doc, indent=1), encoding="utf-8")
+    atomic_write(path, json.dumps(doc, indent=1))
 
 
 def _summary(report: RenderReport, cameras: Sequence[Camera], out_dir: Path) -> str:

@@ -6,13 +6,14 @@ import argparse
 from pathlib import Path
 from typing import Any
 
+from ...core.atomic import Named, all_or_nothing, check_outputs, require_input
 from ...core.cameras.camera import Camera
 from ...core.cameras.files import load_views
 from ...core.cameras.llff import load_llff
 from ...core.scene.files import read_scene
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import render_options, scene_options
+from .args import render_options, scene_input, scene_options
 from .options import add_setting_arguments, config_from_args
 
 
@@ -43,8 +44,41 @@ def _views_source(args: argparse.Namespace) -> str | None:
     return None if source is None else str(source)
 
 
+def check_paths(args: argparse.Namespace) -> list[Named]:
+    """Refuse inputs that are no file (or folder) and outputs that would overwrite an input or cannot be
+    written, before any work; the outputs given."""
+    inputs = scene_input(args.scene)
+    others = (
+        ("texture", args.texture, False),
+        ("region", args.region, False),
+        ("cameras", args.cameras, True),
+        ("LLFF folder", args.llff, True),
+        ("weights", args.weights_path, True),
+    )
+    for what, path, folder in others:
+        if path is not None:
+            require_input(what, path, folder=folder)
+            inputs.append((what, path))
+    given = (("-o", args.output), ("--report", args.report), ("--strip", args.strip))
+    outputs = [(what, path) for what, path in given if path is not None]
+    check_outputs(outputs, inputs)
+    return outputs
+
+
 def cmd_transfer(args: argparse.Namespace) -> None:
-    """Re-texture a scene, write the stylised PLY (and report, strip), print a summary."""
+    """Re-texture a scene, write the stylised scene (and report, strip), all or nothing; print a summary."""
+    outputs = check_paths(args)
+    with all_or_nothing(path for _, path in outputs):
+        report = _transfer(args)
+    print("\n".join(f"{_WROTE[what]}: {path}" for what, path in outputs))
+    print(summary(report))
+
+
+_WROTE = {"-o": "stylised scene", "--report": "report", "--strip": "before/after"}
+
+
+def _transfer(args: argparse.Namespace) -> dict:
+    """Read the inputs, run the transfer, write the outputs; the run's report."""
     scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
     texture = read_texture(args.texture)  # inputs are checked before any work starts
     region = load_region(args.region, len(scene)) if args.region is not None else None
@@ -62,13 +96,9 @@ def cmd_transfer(args: argparse.Namespace) -> None:
             scene_name=args.scene,
             views_name=_views_source(args),
         )
-    print(f"stylised scene: {args.output}")
-    if args.report is not None:
-        print(f"report: {args.report}")
     if args.strip is not None:
         write_before_after(args.strip, scene, result.scene, texture)
-        print(f"before/after: {args.strip}")
-    print(summary(result.report))
+    return result.report
 
 
 def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:

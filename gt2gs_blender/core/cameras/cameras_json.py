@@ -144,4 +144,4 @@ def _write_atomically(path: str | os.PathLike, text: str) -> None:
     try:
         atomic_write(path, text)
     except OSError as exc:
-        raise CameraFileError(path, f"cannot write: {exc}") from exc
+        raise CameraFileError(path, f"cannot write: {exc.strerror or exc}") from exc

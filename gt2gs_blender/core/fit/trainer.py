@@ -277,14 +277,23 @@ def llff_image_folder(scene_dir: Path, downscale: int) -> str:
     raise InputFileError(scene_dir, f"no image folder (images, images_2 ... images_{downscale})")
 
 
+def inria_files(out_dir: Path, iteration: int) -> tuple[Path, Path, Path]:
+    """Where :func:`write_inria` writes: the iteration's PLY, its copy at the top, cameras.json."""
+    return (
+        out_dir / "point_cloud" / f"iteration_{iteration}" / "point_cloud.ply",
+        out_dir / "point_cloud.ply",
+        out_dir / "cameras.json",
+    )
+
+
 def write_inria(out_dir: Path, scene: GaussianScene, cameras: Sequence[Camera], iteration: int) -> None:
     """The INRIA 3DGS output layout: point_cloud/iteration_N/point_cloud.ply and cameras.json, plus a
     copy of the PLY at the top (point_cloud.ply) for tools that take one file."""
-    folder = out_dir / "point_cloud" / f"iteration_{iteration}"
-    folder.mkdir(parents=True, exist_ok=True)
-    write_ply(folder / "point_cloud.ply", scene)
-    write_ply(out_dir / "point_cloud.ply", scene)
-    save_cameras_json(out_dir / "cameras.json", cameras)
+    ply, top, cameras_file = inria_files(out_dir, iteration)
+    ply.parent.mkdir(parents=True, exist_ok=True)
+    write_ply(ply, scene)
+    write_ply(top, scene)
+    save_cameras_json(cameras_file, cameras)
 
 
 def fit_llff(
