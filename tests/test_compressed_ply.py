@@ -315,7 +315,7 @@ def test_writer_takes_a_gaussian_scene_and_refuses_nan(tmp_path):
     assert write_compressed_ply(path, scene) == []
     assert len(read_compressed_ply(path)) == 20
     arrays.means[3, 1] = np.nan
-    with pytest.raises(ValueError, match="1 of 20 Gaussians"):
+    with pytest.raises(SplatFormatError, match=r"nan\.compressed\.ply: 1 of 20 Gaussians"):
         write_compressed_ply(tmp_path / "nan.compressed.ply", arrays)
     assert not (tmp_path / "nan.compressed.ply").exists()
 

@@ -28,7 +28,8 @@ class NotGaussianPlyError(PlyFormatError):
 
 
 class SplatFormatError(InputFileError):
-    """A splat file (compressed PLY, SOG, SPZ, .splat) is malformed, truncated or of an unknown version."""
+    """A splat file (compressed PLY, SOG, SPZ, .splat) is malformed, truncated or of an unknown version, or
+    cannot hold the scene a writer was given."""
 
 
 class CameraFileError(InputFileError):

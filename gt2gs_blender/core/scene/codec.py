@@ -29,6 +29,13 @@ PathLike = str | os.PathLike
 MAX_DECOMPRESSED = 8 * 2**30
 """Largest decompressed payload a reader accepts (about 60M splats of SH degree 3): beyond it a file is a
 decompression bomb, not a scene."""
+EXPANSION = 16
+"""How many times its own size a compressed file may declare when decoded: real SPZ and SOG files expand
+1.4-2x (deflate's most is 1032x, for runs of one byte)."""
+DECODE_FLOOR = 64 * 2**20
+"""Any file may declare this much decoded data, however small it is (a scene of identical splats packs tight)."""
+DROP_HINT = "use --drop-invalid (drop_invalid=True) to load the file without them"
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 OPACITY_EPS = 1e-6
 """Opacities are clipped to [eps, 1 - eps] before the logit, so 0 and 1 in a file stay finite."""
 
@@ -105,8 +112,8 @@ def make_arrays(
     sh_rest: np.ndarray,
     drop_invalid: bool = False,
 ) -> SplatArrays:
-    """The ``SplatArrays`` a reader returns: float32, shapes checked, and Gaussians with NaN/Inf values an
-    error naming ``path`` (or, with ``drop_invalid``, dropped with a warning), as for PLY files."""
+    """The ``SplatArrays`` a reader returns: float32, shapes checked, and Gaussians with NaN/Inf values (or values
+    beyond float32) an error naming ``path`` (or, with ``drop_invalid``, dropped with a warning), as for PLY files."""
     arrays = {
         "means": means,
         "quats": quats,
@@ -117,41 +124,75 @@ def make_arrays(
     }
     n = len(means)
     expected = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,), "sh_dc": (n, 3)}
+    sources = arrays
     with np.errstate(over="ignore", invalid="ignore"):
-        arrays = {key: np.ascontiguousarray(values, np.float32) for key, values in arrays.items()}
+        arrays = {key: np.ascontiguousarray(values, np.float32) for key, values in sources.items()}
     for key, shape in expected.items():
         if arrays[key].shape != shape:
             raise SplatFormatError(path, f"{key} has shape {arrays[key].shape}, expected {shape}")
     if arrays["sh_rest"].ndim != 3 or arrays["sh_rest"].shape[0] != n or arrays["sh_rest"].shape[2] != 3:
         raise SplatFormatError(path, f"SH coefficients have shape {arrays['sh_rest'].shape}, expected ({n}, K, 3)")
-    finite = np.ones(n, bool)
-    for values in arrays.values():
-        if not np.isfinite(values).all():
-            finite &= np.isfinite(values).reshape(n, -1).all(axis=1)
-    n_bad = n - int(finite.sum())
-    if n_bad:
+    bad, why = _invalid_rows(arrays, sources)
+    if bad.any():
         if not drop_invalid:
-            raise SplatFormatError(
-                path,
-                f"{n_bad} of {n} Gaussians have non-finite values (NaN or Inf); use --drop-invalid "
-                "(drop_invalid=True) to load the file without them",
-            )
-        warnings.warn(f"{os.fspath(path)}: dropped {n_bad} of {n} Gaussians with non-finite values", stacklevel=3)
-        arrays = {key: values[finite] for key, values in arrays.items()}
+            raise SplatFormatError(path, f"{int(bad.sum())} of {n} Gaussians have {why}; {DROP_HINT}")
+        warnings.warn(f"{os.fspath(path)}: dropped {int(bad.sum())} of {n} Gaussians with {why}", stacklevel=3)
+        arrays = {key: values[~bad] for key, values in arrays.items()}
     return SplatArrays(**arrays, extras={}, ply_layout=None)
 
 
-def gunzip(path: PathLike, data: bytes, limit: int = MAX_DECOMPRESSED) -> bytes:
-    """Decompress gzip ``data`` read from ``path``, refusing more than ``limit`` bytes (a gzip bomb) and
-    reporting a corrupt or truncated stream as one error naming the file."""
+def _invalid_rows(arrays: dict[str, np.ndarray], sources: dict[str, np.ndarray]) -> tuple[np.ndarray, str]:
+    """The rows with a value float32 cannot hold, and what is wrong with them: NaN or Inf in the file, or finite
+    values that decode beyond float32's range (so the file is not blamed for an Inf it does not hold)."""
+    n = len(arrays["means"])
+    bad, overflow = np.zeros(n, bool), np.zeros(n, bool)
+    for key, values in arrays.items():
+        if np.isfinite(values).all():
+            continue
+        rows = ~np.isfinite(values).reshape(n, -1).all(axis=1)
+        bad |= rows
+        with np.errstate(invalid="ignore"):
+            source = np.asarray(sources[key], np.float64).reshape(n, -1)
+        overflow |= rows & np.isfinite(source).all(axis=1)
+    beyond = f"values that decode beyond float32's range (+-{FLOAT32_MAX:.3g})"
+    if not overflow.any():
+        return bad, "non-finite values (NaN or Inf)"
+    return bad, beyond if overflow.sum() == bad.sum() else f"non-finite values (NaN or Inf) or {beyond}"
+
+
+def over_budget(declared: int, file_size: int, what: str) -> str | None:
+    """Why ``declared`` decoded bytes (``what``, from a header) are too many for a ``file_size``-byte file to hold,
+    checked before anything is allocated (a decompression bomb or a corrupt header); None when they fit."""
+    limit = min(MAX_DECOMPRESSED, max(DECODE_FLOOR, EXPANSION * file_size))
+    if declared <= limit:
+        return None
+    return (
+        f"declares {declared} bytes uncompressed ({what}), over the {limit}-byte limit for a {file_size}-byte file: "
+        "a corrupt header or a decompression bomb"
+    )
+
+
+def inflate(path: PathLike, data: bytes, size: int) -> bytes:
+    """The first ``size`` bytes that gzip ``data`` (read from ``path``) decompresses to, fewer when it holds fewer;
+    a corrupt or truncated stream is one error naming the file. Nothing past ``size`` is inflated."""
     try:
         with gzip.GzipFile(fileobj=io.BytesIO(data)) as stream:
-            out = stream.read(limit + 1)
+            return stream.read(size)
     except (OSError, EOFError, zlib.error) as exc:
         raise SplatFormatError(path, f"the gzip stream is corrupt or truncated ({exc})") from None
-    if len(out) > limit:
-        raise SplatFormatError(path, f"decompresses to more than {limit / 2**20:,.0f} MiB: not a splat file")
-    return out
+
+
+def require_finite(path: PathLike, arrays: SplatArrays, fmt: str) -> None:
+    """A scene with NaN/Inf values cannot be quantised (a NaN would spoil a whole range): an error naming the
+    file that was to be written."""
+    n = len(arrays)
+    finite = np.ones(n, bool)
+    for values in arrays.tensors().values():
+        if not np.isfinite(values).all():
+            finite &= np.isfinite(values).reshape(n, -1).all(axis=1)
+    if not finite.all():
+        bad = n - int(finite.sum())
+        raise SplatFormatError(path, f"{bad} of {n} Gaussians have NaN or Inf values, which {fmt} cannot store")
 
 
 def read_bytes(path: PathLike) -> bytes:

@@ -51,6 +51,7 @@ from .codec import (
     logit,
     make_arrays,
     read_bytes,
+    require_finite,
     sigmoid,
     smallest_three,
 )
@@ -253,10 +254,10 @@ def _unpack_sh(records: np.ndarray | None, n: int) -> np.ndarray:
 
 def write_compressed_ply(path: PathLike, scene: GaussianScene | SplatArrays) -> list[str]:
     """Write a scene as a compressed PLY atomically, in the scene's splat order; return one-line notes
-    on what the format could not keep. ``ValueError`` for a scene with NaN/Inf values."""
+    on what the format could not keep. ``SplatFormatError`` naming ``path`` for a scene with NaN/Inf values."""
     arrays = as_arrays(scene)
     n = len(arrays)
-    _check_finite(arrays)
+    require_finite(path, arrays, "compressed PLY")
     means = arrays.means.astype(np.float32)
     log_scales = arrays.log_scales.astype(np.float32)
     colour = colour_from_dc(arrays.sh_dc.astype(np.float32))
@@ -277,19 +278,6 @@ def write_compressed_ply(path: PathLike, scene: GaussianScene | SplatArrays) -> 
     sh = _pack_sh(arrays.sh_rest)
     atomic_write(Path(path), (_header(n, len(starts), k), ranges, vertex, sh))
     return _notes(arrays)
-
-
-def _check_finite(arrays: SplatArrays) -> None:
-    """A scene with NaN/Inf values cannot be quantised (a NaN would spoil its whole chunk's ranges)."""
-    n = len(arrays)
-    finite = np.ones(n, bool)
-    for values in arrays.tensors().values():
-        if not np.isfinite(values).all():
-            finite &= np.isfinite(values).reshape(n, -1).all(axis=1)
-    if not finite.all():
-        raise ValueError(
-            f"{n - int(finite.sum())} of {n} Gaussians have NaN/Inf values; compressed PLY cannot store them"
-        )
 
 
 def _chunk_ranges(values: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -143,9 +143,14 @@ def _head(path: Path, size: int = 16) -> bytes:
 def read_splats(path: PathLike, *, drop_invalid: bool = False, **options: object) -> SplatArrays:
     """Load any splat file as numpy arrays (``options``: format-specific, e.g. SOG's ``decode_webp``)."""
     fmt = detect_format(path)
-    if fmt == SOG:
-        return read_sog(path, drop_invalid=drop_invalid, **options)
-    return READERS[fmt](path, drop_invalid=drop_invalid)
+    try:
+        if fmt == SOG:
+            return read_sog(path, drop_invalid=drop_invalid, **options)
+        return READERS[fmt](path, drop_invalid=drop_invalid)
+    except MemoryError:  # what the headers declare fits their budget, yet not in this machine's memory
+        raise SplatFormatError(
+            path, f"too large to decode in the memory available (a {FORMATS[fmt].label} file)"
+        ) from None
 
 
 def read_scene(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:

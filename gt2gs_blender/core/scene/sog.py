@@ -25,7 +25,8 @@ order is not its source's.
   is an error here (splat-transform reads zeros).
 
 Version 1 (no ``version``: per-channel min/max instead of codebooks) is not read. Entries are checked
-against ``codec.MAX_DECOMPRESSED`` before they are inflated. numpy only: the WebP decoder is a parameter
+against ``codec.MAX_DECOMPRESSED`` before they are inflated, and the pixels the WebP headers declare against
+``codec.over_budget`` before any image is decoded. numpy only: the WebP decoder is a parameter
 (``decode_webp``); the default one imports OpenCV when it is called, and Blender passes its own.
 """
 
@@ -34,6 +35,7 @@ from __future__ import annotations
 import io
 import json
 import math
+import struct
 import zipfile
 from collections.abc import Callable
 from pathlib import Path, PurePosixPath
@@ -56,6 +58,8 @@ PALETTE_ROW = 64
 """Palette entries per row of the ``shN_centroids`` image."""
 SH_COEFFS = {1: 3, 2: 8, 3: 15}
 """Coefficients per colour channel beyond the DC term, by SH degree (``shN.bands``)."""
+WEBP_HEADER = 30
+"""Bytes of a WebP file that hold its size, whichever its kind."""
 QUAT_TAG = 252
 """Alpha of a ``quats`` pixel: QUAT_TAG + the index (w, x, y, z) of the dropped largest component."""
 """The components R, G, B hold, by dropped component."""
@@ -69,6 +73,7 @@ def read_sog(path: PathLike, *, decode_webp: WebpDecoder | None = None, drop_inv
     count, sh = meta["count"], meta.get("shN")
     if count == 0:
         return _empty(source, SH_COEFFS[sh["bands"]] if sh else 0, drop_invalid)
+    _check_image_budget(source, _names(meta))
     means_low, means_high = (_pixels(source, name, decode, count) for name in meta["means"]["files"])
     sh0 = _pixels(source, meta["sh0"]["files"][0], decode, count)
     scales = _pixels(source, meta["scales"]["files"][0], decode, count)
@@ -127,22 +132,52 @@ class _Source:
             return SplatFormatError(self.path, f"{name}: {problem}")
         return SplatFormatError(self.path if name == META_NAME else self.folder / name, problem)
 
+    def head(self, name: str, size: int) -> bytes:
+        """The first ``size`` bytes of a file named in meta.json (nothing else is read or inflated)."""
+        self._check_name(name)
+        try:
+            if self.archive is None:
+                with open(self.folder / name, "rb") as f:
+                    return f.read(size)
+            with self.archive.open(_entry(self, name)) as f:
+                return f.read(size)
+        except (OSError, zipfile.BadZipFile, EOFError, NotImplementedError, RuntimeError, ValueError) as exc:
+            raise self.error(name, f"cannot be read ({exc})") from None
+
+    def stored_size(self, name: str) -> int:
+        """The bytes a file named in meta.json takes in the zip or on disk."""
+        if self.archive is not None:
+            return _entry(self, name).compress_size
+        try:
+            return (self.folder / name).stat().st_size
+        except OSError as exc:
+            raise self.error(name, f"cannot be read ({exc.strerror or exc})") from None
+
     def read(self, name: str) -> bytes:
         """The bytes of a file named in meta.json."""
-        parts = PurePosixPath(name).parts
-        if not name or name.startswith("/") or ".." in parts or "\\" in name:
-            raise self.error(META_NAME, f"file name {name!r} is not a plain name beside meta.json")
+        self._check_name(name)
         if self.archive is None:
             return read_bytes(self.folder / name)
         return _read_entry(self, name)
 
+    def _check_name(self, name: str) -> None:
+        """A name in meta.json must be a plain name beside it (no absolute path, no ``..``)."""
+        parts = PurePosixPath(name).parts
+        if not name or name.startswith("/") or ".." in parts or "\\" in name:
+            raise self.error(META_NAME, f"file name {name!r} is not a plain name beside meta.json")
+
+
+def _entry(source: _Source, name: str) -> zipfile.ZipInfo:
+    """A zip entry by name; a missing one is an error naming it."""
+    try:
+        return source.archive.getinfo(name)
+    except KeyError:
+        raise source.error(name, "missing from the zip") from None
+
 
 def _read_entry(source: _Source, name: str) -> bytes:
     """A zip entry's bytes, refusing one that declares more than ``codec.MAX_DECOMPRESSED`` (a zip bomb)."""
-    try:
-        info = source.archive.getinfo(name)
-    except KeyError:
-        raise source.error(name, "missing from the zip") from None
+    info = _entry(source, name)
     limit = codec.MAX_DECOMPRESSED
     if info.file_size > limit:
         raise source.error(name, f"declares {info.file_size} bytes uncompressed, over the {limit}-byte limit")
@@ -177,6 +212,8 @@ def _parse_meta(source: _Source) -> dict[str, Any]:
         meta = json.loads(data)
     except (UnicodeDecodeError, ValueError) as exc:
         raise source.error(META_NAME, f"is not JSON ({exc})") from None
+    except RecursionError:
+        raise source.error(META_NAME, "is nested too deeply to be a SOG's meta.json") from None
     if not isinstance(meta, dict):
         raise source.error(META_NAME, "is not a JSON object")
     version = meta.get("version")
@@ -238,6 +275,40 @@ def _is_int(value: object) -> bool:
 
 def _is_number(value: object) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool)
+
+
+def _names(meta: dict[str, Any]) -> list[str]:
+    """Every image file meta.json names, in the order they are decoded."""
+    sections = ("means", "sh0", "scales", "quats", "shN")
+    return [name for key in sections if meta.get(key) for name in meta[key]["files"]]
+
+
+def webp_size(data: bytes) -> tuple[int, int] | None:
+    """Width and height that a WebP file's header declares (lossy, lossless or extended), read without
+    decoding it; None when ``data`` does not start as a WebP file."""
+    if len(data) < WEBP_HEADER or data[:4] != b"RIFF" or data[8:12] != b"WEBP":
+        return None
+    kind = data[12:16]
+    if kind == b"VP8 ":
+        width, height = struct.unpack_from("<HH", data, 26)
+        return width & 0x3FFF, height & 0x3FFF
+    if kind == b"VP8L":
+        (bits,) = struct.unpack_from("<I", data, 21)
+        return (bits & 0x3FFF) + 1, ((bits >> 14) & 0x3FFF) + 1
+    if kind == b"VP8X":
+        return int.from_bytes(data[24:27], "little") + 1, int.from_bytes(data[27:30], "little") + 1
+    return None
+
+
+def _check_image_budget(source: _Source, names: list[str]) -> None:
+    """Refuse images whose headers declare more pixels than the SOG's size can hold, before any is decoded."""
+    sizes = {name: webp_size(source.head(name, WEBP_HEADER)) for name in names}
+    declared = sum(4 * width * height for width, height in filter(None, sizes.values()))
+    what = ", ".join(f"{name} {size[0]}x{size[1]}" for name, size in sizes.items() if size)
+    stored = sum(source.stored_size(name) for name in names)
+    problem = codec.over_budget(declared, stored, f"the RGBA pixels of {what}")
+    if problem:
+        raise source.error(META_NAME, problem)
 
 
 def _image(source: _Source, name: str, decode: WebpDecoder) -> np.ndarray:

@@ -58,10 +58,11 @@ from .codec import (
     canonical_quats,
     dropped_notes,
     from_smallest_three,
-    gunzip,
+    inflate,
     logit,
     make_arrays,
     read_bytes,
+    require_finite,
     sigmoid,
     smallest_three,
 )
@@ -134,28 +135,29 @@ def read_spz(path: PathLike, *, drop_invalid: bool = False) -> SplatArrays:
 
 
 def _gzip_blocks(path: PathLike, data: bytes) -> tuple[_Header, dict[str, np.ndarray]]:
-    """Header and attribute blocks of a version 2 or 3 file: one gzip stream, 16-byte header first."""
-    payload = gunzip(path, data, codec.MAX_DECOMPRESSED)
-    if len(payload) < HEADER.size:
-        raise SplatFormatError(path, f"truncated: {len(payload)} bytes, less than the {HEADER.size}-byte spz header")
-    magic, version, count, sh_degree, fractional_bits, flags, _ = HEADER.unpack_from(payload)
+    """Header and attribute blocks of a version 2 or 3 file: one gzip stream, 16-byte header first. The header
+    is read first, so a stream never inflates past what its point count needs (no gzip bombs)."""
+    head = inflate(path, data, HEADER.size)
+    if len(head) < HEADER.size:
+        raise SplatFormatError(path, f"truncated: {len(head)} bytes, less than the {HEADER.size}-byte spz header")
+    magic, version, count, sh_degree, fractional_bits, flags, _ = HEADER.unpack_from(head)
     if magic != MAGIC:
         raise SplatFormatError(path, f"not an spz file (magic {magic:#010x}, expected {MAGIC:#010x} 'NGSP')")
     if version not in GZIP_VERSIONS:
         raise SplatFormatError(path, f"unsupported spz version {version} in a gzip stream (versions 2 and 3 are)")
-    header = _checked_header(path, _Header(version, count, sh_degree, fractional_bits, flags))
+    header = _checked_header(path, _Header(version, count, sh_degree, fractional_bits, flags), len(data))
     sizes = _block_sizes(header)
-    need, have = sum(sizes.values()), len(payload) - HEADER.size
+    need = sum(sizes.values())
+    payload = inflate(path, data, HEADER.size + need + (0 if flags & FLAG_EXTENSIONS else 1))
+    have = len(payload) - HEADER.size
     if have < need:
         raise SplatFormatError(
             path,
             f"truncated: the header promises {count} points ({need} bytes of data) but only {have} bytes follow "
             "(truncated file or wrong point count)",
         )
-    if have > need and not flags & FLAG_EXTENSIONS:
-        raise SplatFormatError(
-            path, f"{have} bytes of data, more than the {need} that the header's {count} points need"
-        )
+    if have > need:
+        raise SplatFormatError(path, f"more data than the {need} bytes that the header's {count} points need")
     blocks, offset = {}, HEADER.size
     for name, size in sizes.items():
         blocks[name] = np.frombuffer(payload, np.uint8, size, offset)
@@ -171,16 +173,18 @@ def _zstd_blocks(path: PathLike, data: bytes) -> tuple[_Header, dict[str, np.nda
     _, version, count, sh_degree, fractional_bits, flags, n_streams, toc = HEADER_V4.unpack_from(data)
     if version != ZSTD_VERSION:
         raise SplatFormatError(path, f"unsupported spz version {version} (this reader reads versions 2, 3 and 4)")
-    header = _checked_header(path, _Header(version, count, sh_degree, fractional_bits, flags))
+    header = _checked_header(path, _Header(version, count, sh_degree, fractional_bits, flags), len(data))
     sizes = _block_sizes(header)
     names = [name for name in sizes if name != "sh" or sh_degree > 0]
     if n_streams != len(names):
         raise SplatFormatError(path, f"{n_streams} data streams, expected {len(names)} for SH degree {sh_degree}")
-    if sum(sizes.values()) > codec.MAX_DECOMPRESSED:
-        raise SplatFormatError(path, f"{count} points of SH degree {sh_degree} are too many: not a splat file")
     offset = toc + 16 * n_streams
     if toc < HEADER_V4.size or offset > len(data):
-        raise SplatFormatError(path, "truncated: the table of contents lies beyond the end of the file")
+        raise SplatFormatError(
+            path,
+            f"the table of contents ({16 * n_streams} bytes at offset {toc}) does not lie between the "
+            f"{HEADER_V4.size}-byte header and the end of the {len(data)}-byte file",
+        )
     table = np.frombuffer(data, "<u8", 2 * n_streams, toc).reshape(n_streams, 2)
     zstd = _zstandard(path)
     blocks = {"sh": np.empty(0, np.uint8)}
@@ -219,10 +223,14 @@ def _unzstd(path: PathLike, zstd, packed: bytes, size: int, name: str) -> np.nda
     return np.frombuffer(out, np.uint8)
 
 
-def _checked_header(path: PathLike, header: _Header) -> _Header:
-    """The header, once its SH degree is one the engine holds."""
+def _checked_header(path: PathLike, header: _Header, file_size: int) -> _Header:
+    """The header, once its SH degree is one the engine holds and its point count fits in the file's budget."""
     if header.sh_degree > 3:
         raise SplatFormatError(path, f"SH degree {header.sh_degree} is not supported (0 to 3)")
+    what = f"{header.count} points of SH degree {header.sh_degree}"
+    problem = codec.over_budget(sum(_block_sizes(header).values()), file_size, what)
+    if problem:
+        raise SplatFormatError(path, problem)
     return header
 
 
@@ -273,15 +281,16 @@ def write_spz(
 
     ``fractional_bits``: position steps of 2^-bits; None keeps the reference writer's 12, fewer when a
     position lies beyond +-2048. ``sh_bits``: the bits kept of SH band 1 and of bands 2-3 (1-8; the
-    reference writer's 5 and 4 by default). ``ValueError`` for NaN/Inf values or positions out of range.
+    reference writer's 5 and 4 by default). ``SplatFormatError`` naming ``path`` for NaN/Inf values or positions
+    out of range; ``ValueError`` for bad options.
     """
     if version not in GZIP_VERSIONS:
         raise ValueError(f"spz version must be one of {GZIP_VERSIONS} (version 4 is read only), got {version}")
     if not all(1 <= bits <= 8 for bits in sh_bits):
         raise ValueError(f"sh_bits must be two bit counts from 1 to 8, got {sh_bits}")
     arrays = as_arrays(scene)
-    _check_finite(arrays)
-    bits = _fractional_bits(np.asarray(arrays.means, np.float64), fractional_bits)
+    require_finite(path, arrays, "spz")
+    bits = _fractional_bits(path, np.asarray(arrays.means, np.float64), fractional_bits)
     payload = _payload(arrays, version, bits, sh_bits)
     atomic_write(Path(path), gzip.compress(payload, compresslevel=6, mtime=0))
     return dropped_notes(arrays, "spz", 3) + _clipping_notes(arrays)
@@ -329,17 +338,10 @@ def _clipping_notes(arrays: SplatArrays) -> list[str]:
     return notes
 
 
-def _check_finite(arrays: SplatArrays) -> None:
-    """A scene with NaN/Inf parameters cannot be quantised: a caller bug, ``ValueError``."""
-    bad = sum(int(np.count_nonzero(~np.isfinite(values))) for values in arrays.tensors().values())
-    if bad:
-        raise ValueError(f"the scene has {bad} non-finite (NaN or Inf) parameter values; spz cannot store them")
-
-
-def _fractional_bits(means: np.ndarray, wanted: int | None) -> int:
+def _fractional_bits(path: PathLike, means: np.ndarray, wanted: int | None) -> int:
     """``wanted`` (None: the reference writer's 12, or fewer when the positions need the range), checked to
     hold every position in 24-bit fixed point."""
-    most = _most_fractional_bits(means)
+    most = _most_fractional_bits(path, means)
     if wanted is None:
         return min(REFERENCE_FRACTIONAL_BITS, most)
     if not 0 <= wanted <= most:
@@ -347,8 +349,9 @@ def _fractional_bits(means: np.ndarray, wanted: int | None) -> int:
     return wanted
 
 
-def _most_fractional_bits(means: np.ndarray) -> int:
-    """The most fractional bits (up to 30) whose 24-bit fixed point holds every position."""
+def _most_fractional_bits(path: PathLike, means: np.ndarray) -> int:
+    """The most fractional bits (up to 30) whose 24-bit fixed point holds every position; an error naming the
+    file to be written when none does."""
     largest = float(np.max(np.abs(means))) if means.size else 0.0
     bits = MAX_FRACTIONAL_BITS
     if largest > 0.0:
@@ -356,7 +359,7 @@ def _most_fractional_bits(means: np.ndarray) -> int:
     while bits >= 0 and np.round(largest * 2.0**bits) > _INT24_MAX:
         bits -= 1
     if bits < 0:
-        raise ValueError(f"positions reach {largest:g}, beyond the +-{_INT24_MAX} units spz can store")
+        raise SplatFormatError(path, f"positions reach {largest:g}, beyond the +-{_INT24_MAX} units spz can store")
     return bits
 
 
