@@ -36,12 +36,25 @@ STRIP_VIEWS = 4
 STRIP_SIZE = 256
 
 
+def load_npy(path: Path, what: str) -> np.ndarray:
+    """A user's .npy file as an array; an empty, truncated or malformed one (or a pickle, or a .npz) is one line
+    naming it. The file is mapped before it is copied, so a header that declares more than the file holds is
+    refused rather than allocated."""
+    try:
+        array = np.load(path, mmap_mode="r", allow_pickle=False)
+    except EOFError:
+        raise InputFileError(path, f"cannot read {what}: the file is empty or ends early (.npy expected)") from None
+    except (OSError, ValueError, SyntaxError) as exc:
+        raise InputFileError(path, f"cannot read {what} as a .npy array ({' '.join(str(exc).split())})") from None
+    if not isinstance(array, np.ndarray):
+        array.close()
+        raise InputFileError(path, f"{what} must be one .npy array, not a .npz archive of several")
+    return np.array(array)
+
+
 def load_region(path: Path, n: int) -> np.ndarray:
     """A region file: a .npy of Gaussian indices, or of n booleans (True = restyle)."""
-    try:
-        region = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputFileError(path, f"cannot read the region as a .npy array: {exc}") from exc
+    region = load_npy(path, "the region")
     if region.dtype == np.bool_:
         if region.shape != (n,):
             raise InputFileError(path, f"a boolean region needs {n} entries (one per Gaussian), has {region.shape}")
@@ -56,10 +69,7 @@ def read_texture(path: Path) -> np.ndarray:
     """The texture as (H,W,3) float32 in [0,1]: an image file, or pixels saved as .npy (Blender's images)."""
     if path.suffix.lower() != ".npy":
         return load_texture(path)
-    try:
-        image = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise InputFileError(path, f"cannot read the texture pixels ({exc})") from None
+    image = load_npy(path, "the texture pixels")
     if image.ndim != 3 or image.shape[2] < 3 or not np.isfinite(image).all():
         raise InputFileError(path, f"texture pixels must be a finite (H, W, 3) array, got {image.shape}")
     return np.clip(image[..., :3], 0.0, 1.0).astype(np.float32)

@@ -60,6 +60,8 @@ def _decode(data: np.ndarray, path: str | os.PathLike) -> np.ndarray:
         image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as exc:  # codecs refuse some files with an exception rather than None
         raise InputFileError(path, _codec_problem(str(exc))) from None
+    if (image is None or image.size == 0) and data[:4].tobytes() == b"GIF8":
+        raise InputFileError(path, "a GIF, which is not supported as a texture: save it as PNG, JPEG, TIFF or WebP")
     if image is None or image.size == 0:
         raise InputFileError(path, "not an image file OpenCV can decode (texture expected: PNG, JPEG, TIFF, ...)")
     if image.ndim == 3 and image.shape[2] in (2, 4):
@@ -132,11 +134,7 @@ def _composite_alpha(colour: np.ndarray, alpha: np.ndarray, path: str | os.PathL
     a = alpha[:, :, None]
     if a.min() < 1.0:
         mean = (colour * a).sum(axis=(0, 1), dtype=np.float64) / total
-        share = float((alpha < 1.0).mean())
-        warnings.warn(
-            f"{os.fspath(path)}: {share:.0%} of the texture is transparent; filled with its mean colour",
-            stacklevel=2,
-        )
+        warnings.warn(f"{os.fspath(path)}: {_transparency(alpha)}; composited over its mean colour", stacklevel=2)
         return (colour * a + mean.astype(np.float32) * (1.0 - a)).astype(np.float32)
     return colour
 
@@ -154,3 +152,11 @@ def _warn_if_unusable(rgb: np.ndarray, path: str | os.PathLike) -> None:
             f"{os.fspath(path)}: the texture is a constant colour; only its colour can be transferred",
             stacklevel=2,
         )
+
+
+def _transparency(alpha: np.ndarray) -> str:
+    """How much of the texture is fully transparent, and how much only partly (alpha between 0 and 1)."""
+    clear, partial = float((alpha <= 0.0).mean()), float(((alpha > 0.0) & (alpha < 1.0)).mean())
+    if not clear:
+        return f"{partial:.0%} of the texture is semi-transparent"
+    return f"{clear:.0%} of the texture is transparent" + (f" and {partial:.0%} semi-transparent" if partial else "")
