@@ -9,7 +9,7 @@ from gt2gs_blender.app.cli.options import config_from_args, flag
 from gt2gs_blender.core.features.weights import PREFERENCES
 from gt2gs_blender.core.render import BACKENDS
 from gt2gs_blender.core.transfer.config import SETTINGS, TransferConfig, user_settings
-from gt2gs_blender.core.transfer.presets import PRESETS
+from gt2gs_blender.core.transfer.presets import PRESETS, preset
 from gt2gs_blender.core.transfer.setting import PARTS
 
 
@@ -66,6 +66,27 @@ def test_cli_options_become_the_config(argv, expected):
     parser = cli.build_parser()
     args = parser.parse_args(["transfer", "s.ply", "t.jpg", "-o", "o.ply", *argv])
     assert config_from_args(args) == PRESETS[args.preset].with_overrides(**expected)
+
+
+@pytest.mark.parametrize("name", [name for name, meta in SETTINGS.items() if meta.choices])
+def test_a_bogus_choice_is_refused_when_the_config_is_made(name):
+    """Every choice setting, not a hand-written list of them: refused at construction, naming the allowed words."""
+    allowed = ", ".join(SETTINGS[name].choices)
+    with pytest.raises(ValueError, match=f"^{name} must be one of {allowed}, got 'bogus'$"):
+        TransferConfig(**{name: "bogus"})
+
+
+@pytest.mark.parametrize("preset_name", list(PRESETS))
+def test_a_texture_height_given_alone_is_the_size_used_in_the_api_as_in_the_cli(preset_name):
+    """``texture_height`` without ``texture_repeats`` means repeats 0 (use the size), through ``preset()`` as
+    through ``--texture-height``; with both given, both are kept."""
+    api = preset(preset_name, texture_height=128)
+    args = cli.build_parser().parse_args(["transfer", "s.ply", "t.jpg", "-o", "o.ply", "--preset", preset_name])
+    args.texture_height = 128
+    assert (api.texture_height, api.texture_repeats) == (128, 0.0)
+    assert config_from_args(args) == api
+    both = preset(preset_name, texture_height=128, texture_repeats=2.0)
+    assert (both.texture_height, both.texture_repeats) == (128, 2.0)
 
 
 def test_an_out_of_range_setting_is_one_user_error(capsys, tmp_path):

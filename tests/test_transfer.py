@@ -76,6 +76,12 @@ def test_transfer_contract(cache):
     assert report["n_gaussians"] == len(scene) and report["n_views"] == 3
     assert set(report["stage_seconds"]) == {"prepare", "bank", "stylise", "finish"}
     assert "fallback" in report["weights"] and report["weights"]["reason"]
+    # what was asked, and what ran: the automatic values resolved, nothing else changed
+    asked, ran, resolved = report["asked"], report["config"], report["resolved"]
+    assert asked == tiny(cache_dir=cache).to_dict()
+    assert {k for k in asked if asked[k] != ran[k]} <= set(resolved) and all(ran[k] == v for k, v in resolved.items())
+    assert asked["stylise_geometry"] == "auto" and resolved["stylise_geometry"] in ("on", "off")
+    assert resolved["layout_projection"] in ("box", "view") and resolved["depth_ratio"] >= 1.0
 
 
 def test_transfer_is_deterministic(cache):

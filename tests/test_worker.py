@@ -107,6 +107,47 @@ def transfer_spec(tmp_path, **config) -> dict:
     }
 
 
+def test_the_job_file_round_trips_through_the_protocol(job, tmp_path):
+    """Blender's side writes the job file with ``JobSpec`` (``Job.start``) and the worker reads it back with
+    ``JobSpec.load``: the same job, its relative paths taken from the job's folder, the cancel file and the
+    preview folder added by the job."""
+    spec = JobSpec(
+        kind="preview",
+        input=Path("input.ply"),
+        texture=tmp_path / "photo.png",
+        output=Path("orientation.png"),
+        views=Path("cameras.json"),
+        preset="preview",
+        config={"angle": 30.0, "background": [0.0, 0.5, 1.0]},
+        region=Path("region.npy"),
+        report=Path("report.json"),
+        preview_size=128,
+        input_name="object 'Donut'",
+        views_name="the scene's cameras",
+    )
+    job.start(spec)
+    job.cancel()
+    loaded = JobSpec.load(job.path("job.json"))
+    folder = job.folder
+    assert loaded == JobSpec(
+        kind="preview",
+        input=folder / "input.ply",
+        texture=tmp_path / "photo.png",
+        output=folder / "orientation.png",
+        views=folder / "cameras.json",
+        preset="preview",
+        config={"angle": 30.0, "background": [0.0, 0.5, 1.0]},
+        region=folder / "region.npy",
+        report=folder / "report.json",
+        preview_dir=folder / "previews",
+        cancel_file=folder / "cancel",
+        preview_size=128,
+        input_name="object 'Donut'",
+        views_name="the scene's cameras",
+    )
+    assert JobSpec.load(job.path("job.json")).to_dict() == loaded.to_dict()
+
+
 def wait_for(job: Job, condition, timeout: float = 120.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -118,7 +159,7 @@ def wait_for(job: Job, condition, timeout: float = 120.0):
 
 
 def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
-    job.start(transfer_spec(tmp_path))
+    job.start(JobSpec.from_dict(transfer_spec(tmp_path)))
     fractions, stages = [], []
     while not job.poll().finished:
         fractions.append(job.status.fraction)
@@ -139,7 +180,7 @@ def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
 def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
     """How long the cancel takes is measured by bench/latency.py; a worker that ignored it would be killed
     after the grace period and fail the exit status check below."""
-    job.start(transfer_spec(tmp_path, stylise_steps=400))
+    job.start(JobSpec.from_dict(transfer_spec(tmp_path, stylise_steps=400)))
     wait_for(job, lambda s: s.stage == "stylise" and s.step >= 2)
     status = job.cancel()
     assert status.state == CANCELLED
@@ -148,7 +189,7 @@ def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
 
 
 def test_killed_worker_is_a_clear_error(job, tmp_path):
-    job.start(transfer_spec(tmp_path, stylise_steps=400))
+    job.start(JobSpec.from_dict(transfer_spec(tmp_path, stylise_steps=400)))
     wait_for(job, lambda s: s.stage == "stylise")
     os.kill(job.process.pid, signal.SIGKILL)
     status = wait_for(job, lambda s: s.finished, timeout=20)
@@ -162,7 +203,7 @@ def test_out_of_memory_is_a_clear_error_and_leaves_no_files(job, tmp_path):
     """A real allocation failure: the worker's address space is capped as soon as it starts, then the
     job asks for 4096 px views on the CPU."""
     cap = address_space_cap()  # measured first: the worker must be capped before it gets far
-    job.start(transfer_spec(tmp_path, resolution=4096, device="cpu"))
+    job.start(JobSpec.from_dict(transfer_spec(tmp_path, resolution=4096, device="cpu")))
     resource.prlimit(job.process.pid, resource.RLIMIT_AS, (cap, cap))  # past it, allocations fail for real
     status = wait_for(job, lambda s: s.finished, timeout=120)
     assert status.state == ERROR and job.process.returncode == EXIT_MEMORY, (status, job.stderr_tail())
@@ -173,7 +214,7 @@ def test_out_of_memory_is_a_clear_error_and_leaves_no_files(job, tmp_path):
 
 
 def test_bad_input_is_one_readable_line(job, tmp_path):
-    job.start({**transfer_spec(tmp_path), "texture": "missing.png"})
+    job.start(JobSpec.from_dict({**transfer_spec(tmp_path), "texture": "missing.png"}))
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
     assert "missing.png" in status.error and "Traceback" not in status.error
@@ -181,7 +222,7 @@ def test_bad_input_is_one_readable_line(job, tmp_path):
 
 def test_cameras_that_see_nothing_are_an_input_error_naming_the_files(job, tmp_path):
     save_cameras_json(job.path("cameras.json"), BLIND_CAMERAS["looking-away"])
-    job.start({**transfer_spec(tmp_path), "views": "cameras.json"})
+    job.start(JobSpec.from_dict({**transfer_spec(tmp_path), "views": "cameras.json"}))
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
     assert status.error.startswith(
@@ -195,12 +236,14 @@ def test_messages_use_the_callers_names_for_temporary_exports(job, tmp_path):
     """Blender exports the object and its cameras to the job folder: messages name the object instead."""
     save_cameras_json(job.path("cameras.json"), BLIND_CAMERAS["looking-away"])
     job.start(
-        {
-            **transfer_spec(tmp_path),
-            "views": "cameras.json",
-            "input_name": "object 'Donut'",
-            "views_name": "the scene's cameras",
-        }
+        JobSpec.from_dict(
+            {
+                **transfer_spec(tmp_path),
+                "views": "cameras.json",
+                "input_name": "object 'Donut'",
+                "views_name": "the scene's cameras",
+            }
+        )
     )
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT
@@ -214,7 +257,7 @@ def test_messages_use_the_callers_names_for_temporary_exports(job, tmp_path):
 def test_region_restyles_only_the_masked_gaussians(job, tmp_path):
     selected = np.arange(0, 600, 2)
     np.save(job.path("region.npy"), selected)
-    job.start({**transfer_spec(tmp_path), "region": "region.npy"})
+    job.start(JobSpec.from_dict({**transfer_spec(tmp_path), "region": "region.npy"}))
     status = wait_for(job, lambda s: s.finished)
     assert status.state == DONE, status.error
     original, result = read_ply_arrays(job.path("input.ply")), read_ply_arrays(status.output)
@@ -225,23 +268,25 @@ def test_region_restyles_only_the_masked_gaussians(job, tmp_path):
 
 def test_region_out_of_range_is_an_input_error(job, tmp_path):
     np.save(job.path("region.npy"), np.array([0, 600]))
-    job.start({**transfer_spec(tmp_path), "region": "region.npy"})
+    job.start(JobSpec.from_dict({**transfer_spec(tmp_path), "region": "region.npy"}))
     status = wait_for(job, lambda s: s.finished)
     assert status.state == ERROR and job.process.returncode == EXIT_INPUT and "region" in status.error
 
 
 def test_preview_job_writes_a_png(job, tmp_path):
     job.start(
-        {
-            "kind": "preview",
-            "input": "input.ply",
-            "texture": "texture.png",
-            "output": "preview.png",
-            "views": 4,
-            "preset": "preview",
-            "config": {"angle": 30.0},
-            "preview_size": 64,
-        }
+        JobSpec.from_dict(
+            {
+                "kind": "preview",
+                "input": "input.ply",
+                "texture": "texture.png",
+                "output": "preview.png",
+                "views": 4,
+                "preset": "preview",
+                "config": {"angle": 30.0},
+                "preview_size": 64,
+            }
+        )
     )
     status = wait_for(job, lambda s: s.finished, timeout=60)
     assert status.state == DONE, status.error

@@ -35,7 +35,7 @@ from typing import TYPE_CHECKING, Any
 
 from ..core.errors import GT2GSError, out_of_memory_message
 from ..core.progress import Cancelled, Progress, Tracker
-from .protocol import EXIT_CANCELLED, EXIT_DONE, EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, Events, JobSpec
+from .protocol import EXIT_CANCELLED, EXIT_DONE, EXIT_INPUT, EXIT_INTERNAL, EXIT_MEMORY, Event, Events, JobSpec
 
 if TYPE_CHECKING:
     from ..core.transfer.config import TransferConfig
@@ -81,7 +81,7 @@ def _config(spec: JobSpec):
 def _send(events: Events, p: Progress, frame: Path | None = None) -> None:
     """One progress event (``frame``: the PNG of its preview image, if any)."""
     events(
-        "progress",
+        Event.PROGRESS,
         stage=p.stage,
         step=p.step,
         total=p.total,
@@ -146,7 +146,7 @@ def run_transfer(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> N
         scene_name=spec.input_name or spec.input,
         views_name=views_name,
     )
-    events("done", output=str(spec.output), report=None if spec.report is None else str(spec.report))
+    events(Event.DONE, output=str(spec.output), report=None if spec.report is None else str(spec.report))
 
 
 def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> None:
@@ -163,7 +163,7 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
     _prepare_kernel(config, lambda p: _send(events, p), cancel)
     shown = preview(scene, read_texture(spec.texture), _views(spec), config, size=spec.preview_size, region=region)
     write_png(spec.output, shown.image)
-    events("done", output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
+    events(Event.DONE, output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
 
 
 def run(job_file: str | os.PathLike, events: Events) -> int:
@@ -180,13 +180,13 @@ def run(job_file: str | os.PathLike, events: Events) -> int:
         return EXIT_DONE
     except GT2GSError as exc:
         if isinstance(exc, Cancelled):
-            events("cancelled")
+            events(Event.CANCELLED)
             return EXIT_CANCELLED
-        events("error", message=str(exc))
+        events(Event.ERROR, message=str(exc))
         return EXIT_INPUT
     except ImportError as exc:
         events(
-            "error",
+            Event.ERROR,
             message=f"the Python package {exc.name or exc} is missing in the worker's Python: "
             "install the dependencies (add-on preferences, or pip install -r requirements.txt)",
         )
@@ -195,9 +195,9 @@ def run(job_file: str | os.PathLike, events: Events) -> int:
         traceback.print_exc()
         memory = out_of_memory_message(exc)
         if memory is not None:
-            events("error", message=memory)
+            events(Event.ERROR, message=memory)
             return EXIT_MEMORY
-        events("error", message=f"internal error: {type(exc).__name__}: {exc}")
+        events(Event.ERROR, message=f"internal error: {type(exc).__name__}: {exc}")
         return EXIT_INTERNAL
 
 

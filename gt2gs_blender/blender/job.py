@@ -21,11 +21,12 @@ import tempfile
 import threading
 import time
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from ..app.deps import worker_pythonpath
+from ..app.protocol import EXIT_CANCELLED, Event, JobSpec
 from ..core.errors import MEMORY_ADVICE
 
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
@@ -37,7 +38,6 @@ STDERR_LINES = 40
 
 IDLE, RUNNING, DONE, ERROR, CANCELLED = "IDLE", "RUNNING", "DONE", "ERROR", "CANCELLED"
 FINISHED_STATES = (DONE, ERROR, CANCELLED)
-EXIT_CANCELLED = 3
 SIGKILL = 9
 """Unblockable kill (POSIX): what the out-of-memory killer (Linux) and jetsam (macOS) send."""
 
@@ -99,10 +99,11 @@ class Job:
     def command(self) -> list[str]:
         return [self.python, "-m", WORKER_MODULE, str(self.path("job.json"))]
 
-    def start(self, spec: dict[str, Any]) -> None:
+    def start(self, spec: JobSpec) -> None:
         """Write ``job.json`` (with the cancel file and preview folder of this job) and launch the worker."""
-        spec = {"cancel_file": "cancel", "preview_dir": "previews", **spec}
-        self.path("job.json").write_text(json.dumps(spec, indent=1), encoding="utf-8")
+        replace(
+            spec, cancel_file=spec.cancel_file or Path("cancel"), preview_dir=spec.preview_dir or Path("previews")
+        ).save(self.path("job.json"))
         self.process = subprocess.Popen(
             self.command(),
             cwd=self.folder,
@@ -161,14 +162,14 @@ class Job:
     def _apply(self, event: dict[str, Any]) -> None:
         status = self.status
         kind = event.get("event")
-        if kind == "progress":
+        if kind == Event.PROGRESS:
             status.fraction = float(event.get("fraction") or 0.0)
             status.stage = str(event.get("stage") or "")
             status.step, status.total = int(event.get("step") or 0), int(event.get("total") or 0)
             status.message = str(event.get("message") or "")
             status.eta_s = event.get("eta_s")
             status.preview = event.get("preview") or status.preview
-        elif kind == "done":
+        elif kind == Event.DONE:
             status.output = event.get("output")
             if event.get("splats") and event.get("scene_splats"):
                 status.splats = int(event["splats"]), int(event["scene_splats"])
@@ -176,7 +177,7 @@ class Job:
             if report and os.path.isfile(report):
                 with open(report, encoding="utf-8") as f:
                     status.report = json.load(f)
-        elif kind == "error":
+        elif kind == Event.ERROR:
             status.error = str(event.get("message") or "the worker failed")
 
     def _settle(self, code: int) -> None:

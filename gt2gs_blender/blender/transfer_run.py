@@ -14,13 +14,15 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import bpy
 import bpy.utils.previews
 import numpy as np
 
+from ..app.protocol import JobSpec
 from ..core.progress import format_eta
 from ..core.transfer.presets import GPU_PRESETS
 from ..core.transfer.setting import IN_PREFERENCES, IN_SCENE
@@ -312,21 +314,22 @@ class TransferRun:
             scene, _ = splats.object_to_scene(obj)
             write_ply(job.path("input.ply"), scene)
             preset, config = config_overrides(context, overrides)
-            spec: dict[str, Any] = {
-                "kind": kind,
-                "input": "input.ply",
-                "texture": texture_spec(context, job, overrides.get("texture_path")),
-                "views": view_spec(context, obj, job, overrides),
-                "preset": preset,
-                "config": config,
-                "output": "result.ply" if kind == "transfer" else "orientation.png",
-                "report": "report.json",
-                "input_name": f"object {obj.name!r}",
-                "views_name": views_label(settings),
-            }
+            chosen = view_spec(context, obj, job, overrides)
+            spec = JobSpec(
+                kind=kind,
+                input=Path("input.ply"),
+                texture=Path(texture_spec(context, job, overrides.get("texture_path"))),
+                output=Path("result.ply" if kind == "transfer" else "orientation.png"),
+                views=Path(chosen) if isinstance(chosen, str) else chosen,
+                preset=preset,
+                config=config,
+                report=Path("report.json"),
+                input_name=f"object {obj.name!r}",
+                views_name=views_label(settings),
+            )
             if settings.region_only:  # the preview lays the texture on the region as the run will
                 np.save(job.path("region.npy"), selected_points(obj))
-                spec["region"] = "region.npy"
+                spec = replace(spec, region=Path("region.npy"))
             job.start(spec)
         except BaseException as exc:
             job.cleanup()
