@@ -26,22 +26,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..core.rotations import quats_to_matrices
-from ..core.scene.inria import NORMAL_NAMES, SH_C0, sh_degree_from_rest
+from ..core.scene.inria import NORMAL_NAMES, SH_C0, sh_degree_from_rest, sh_terms
 
 if TYPE_CHECKING:
     from ..core.scene.arrays import SplatArrays
-
-_SH_C1 = 0.4886025119029199
-_SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-_SH_C3 = (
-    -0.5900435899266435,
-    2.890611442640554,
-    -0.4570457994644658,
-    0.3731763325901154,
-    -0.4570457994644658,
-    1.445305721320277,
-    -0.5900435899266435,
-)
 
 SIMILARITY_TOLERANCE = 1e-6
 """Relative deviation of AᵀA from s²·I below which A counts as a similarity."""
@@ -220,24 +208,7 @@ def _nearest_rotation(a: np.ndarray) -> np.ndarray:
 def sh_basis(dirs: np.ndarray, degree: int) -> np.ndarray:
     """Real SH basis (M, (degree+1)^2) at unit directions (M,3), the 3DGS convention (as core's sh_basis)."""
     x, y, z = np.asarray(dirs, np.float64).T
-    out = [np.full_like(x, SH_C0)]
-    if degree >= 1:
-        out += [-_SH_C1 * y, _SH_C1 * z, -_SH_C1 * x]
-    if degree >= 2:
-        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
-        out += [_SH_C2[0] * xy, _SH_C2[1] * yz, _SH_C2[2] * (2 * zz - xx - yy), _SH_C2[3] * xz, _SH_C2[4] * (xx - yy)]
-    if degree >= 3:
-        xx, yy, zz = x * x, y * y, z * z
-        out += [
-            _SH_C3[0] * y * (3 * xx - yy),
-            _SH_C3[1] * x * y * z,
-            _SH_C3[2] * y * (4 * zz - xx - yy),
-            _SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
-            _SH_C3[4] * x * (4 * zz - xx - yy),
-            _SH_C3[5] * z * (xx - yy),
-            _SH_C3[6] * x * (xx - 3 * yy),
-        ]
-    return np.stack(out, axis=-1)
+    return np.stack([np.full_like(x, SH_C0), *sh_terms(x, y, z, degree)], axis=-1)
 
 
 def _sample_directions(count: int = 64) -> np.ndarray:

@@ -8,18 +8,52 @@ the Blender edge (before torch is installed) take these facts from one place.
 from __future__ import annotations
 
 from collections.abc import Iterable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     import numpy as np
 
 SH_C0 = 0.28209479177387814
 """Degree-0 real spherical-harmonic constant: colour = 0.5 + SH_C0 * f_dc."""
+SH_C1 = 0.4886025119029199
+SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
+SH_C3 = (
+    -0.5900435899266435,
+    2.890611442640554,
+    -0.4570457994644658,
+    0.3731763325901154,
+    -0.4570457994644658,
+    1.445305721320277,
+    -0.5900435899266435,
+)
+"""The real SH constants of bands 1-3, in the reference 3DGS implementation's order."""
 
 POSITION_NAMES = ("x", "y", "z")
 NORMAL_NAMES = ("nx", "ny", "nz")
 """Optional normals; not a Gaussian parameter (kept as extras), written right after the positions."""
 REST_PREFIX = "f_rest_"
+
+
+def sh_terms(x: Any, y: Any, z: Any, degree: int) -> list[Any]:
+    """The real SH basis of bands 1 to ``degree`` at unit directions (x, y, z): numpy arrays or torch tensors
+    alike (plain arithmetic), so the renderer and the Blender edge's SH rotation evaluate one formula."""
+    out = []
+    if degree >= 1:
+        out += [-SH_C1 * y, SH_C1 * z, -SH_C1 * x]
+    if degree >= 2:
+        xx, yy, zz, xy, yz, xz = x * x, y * y, z * z, x * y, y * z, x * z
+        out += [SH_C2[0] * xy, SH_C2[1] * yz, SH_C2[2] * (2 * zz - xx - yy), SH_C2[3] * xz, SH_C2[4] * (xx - yy)]
+    if degree >= 3:
+        out += [
+            SH_C3[0] * y * (3 * xx - yy),
+            SH_C3[1] * xy * z,
+            SH_C3[2] * y * (4 * zz - xx - yy),
+            SH_C3[3] * z * (2 * zz - 3 * xx - 3 * yy),
+            SH_C3[4] * x * (4 * zz - xx - yy),
+            SH_C3[5] * z * (xx - yy),
+            SH_C3[6] * x * (xx - 3 * yy),
+        ]
+    return out
 
 
 def sh_coeff_count(degree: int) -> int:

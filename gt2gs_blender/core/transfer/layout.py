@@ -33,7 +33,6 @@ every view agrees on.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import get_args
@@ -56,7 +55,7 @@ from .config import FORWARD_SPREAD_DEG, TransferConfig
 from .metrics import LUMA
 from .setting import Projection
 from .shade import layout_shade, shading, spatial_blur
-from .texture_bank import bank_scales
+from .texture_bank import bank_scales, screen_rotation
 from .views import ViewSet
 
 SURFACE_ALPHA = 0.9
@@ -355,8 +354,8 @@ def _planes(
 def _sample(texture: np.ndarray, x: torch.Tensor, y: torch.Tensor, angle_deg: float) -> torch.Tensor:
     """Bilinear, wrapped samples of ``texture`` at texture-pixel coordinates (x right, y down),
     the texture turned ``angle_deg`` counter-clockwise on screen (texture_bank's convention)."""
-    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
-    tx, ty = c * x - s * y, s * x + c * y  # the inverse of the on-screen rotation [[c, s], [-s, c]]
+    (c, s), _ = screen_rotation(angle_deg).tolist()
+    tx, ty = c * x - s * y, s * x + c * y  # the inverse (transpose) of the on-screen rotation [[c, s], [-s, c]]
     height, width = texture.shape[:2]
     grid = torch.stack([torch.remainder(tx, width) / width * 2 - 1, torch.remainder(ty, height) / height * 2 - 1], -1)
     image = torch.from_numpy(np.ascontiguousarray(texture)).permute(2, 0, 1)[None].to(x)

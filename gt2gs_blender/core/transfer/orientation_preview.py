@@ -14,7 +14,6 @@ lets an artist choose the angle before starting a transfer.
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -35,7 +34,7 @@ from .plan import RunPlan, plan_run
 from .region import assemble
 from .shade import shading
 from .texture import load_texture
-from .texture_bank import bank_scales, depth_groups, group_depth_ratio
+from .texture_bank import bank_scales, depth_groups, group_depth_ratio, screen_rotation
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""
@@ -44,8 +43,7 @@ MIN_ALPHA = 0.05
 def texture_layer(texture: np.ndarray, angle_deg: float, scale: float, width: int, height: int) -> np.ndarray:
     """The texture tiled over a ``width`` x ``height`` image, ``scale`` image pixels per texture pixel,
     rotated ``angle_deg`` counter-clockwise on screen about the image centre."""
-    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
-    linear = scale * np.array([[c, s], [-s, c]])
+    linear = scale * screen_rotation(angle_deg)
     tex_centre = np.array([(texture.shape[1] - 1) / 2.0, (texture.shape[0] - 1) / 2.0])
     img_centre = np.array([(width - 1) / 2.0, (height - 1) / 2.0])
     matrix = np.hstack([linear, (img_centre - linear @ tex_centre)[:, None]])

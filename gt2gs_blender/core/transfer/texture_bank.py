@@ -287,11 +287,17 @@ def tiled_for_crop(image: np.ndarray, side: int) -> np.ndarray:
     return np.tile(image, (reps[0], reps[1], 1))
 
 
+def screen_rotation(angle_deg: float) -> np.ndarray:
+    """(2, 2) float64: image offsets (x right, y down) turned ``angle_deg`` counter-clockwise on screen, the
+    one rotation convention of the bank's crops, the layout and the orientation preview (OpenCV's own)."""
+    return cv2.getRotationMatrix2D((0.0, 0.0), angle_deg, 1.0)[:, :2]
+
+
 def rotate_crop(image: np.ndarray, angle: float, side: int) -> np.ndarray:
     """The ``side`` x ``side`` centre of ``image`` rotated ``angle`` degrees counter-clockwise on screen."""
     h, w = image.shape[:2]
     centre_in = ((w - 1) / 2.0, (h - 1) / 2.0)
-    matrix = cv2.getRotationMatrix2D(centre_in, angle, 1.0)
+    matrix = cv2.getRotationMatrix2D(centre_in, angle, 1.0)  # screen_rotation about the image's centre
     matrix[:, 2] += (side - 1) / 2.0 - np.asarray(centre_in)
     out = cv2.warpAffine(image, matrix, (side, side), flags=cv2.INTER_LANCZOS4, borderMode=cv2.BORDER_REFLECT_101)
     return np.clip(out, 0.0, 1.0)
