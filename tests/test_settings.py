@@ -8,7 +8,7 @@ from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.app.cli.options import config_from_args, flag
 from gt2gs_blender.core.features.weights import PREFERENCES
 from gt2gs_blender.core.render import BACKENDS
-from gt2gs_blender.core.transfer.config import SETTINGS, TransferConfig, user_settings
+from gt2gs_blender.core.transfer.config import SETTINGS, TransferConfig, setting_type, user_settings
 from gt2gs_blender.core.transfer.presets import PRESETS, preset
 from gt2gs_blender.core.transfer.setting import PARTS
 
@@ -74,6 +74,25 @@ def test_a_bogus_choice_is_refused_when_the_config_is_made(name):
     allowed = ", ".join(SETTINGS[name].choices)
     with pytest.raises(ValueError, match=f"^{name} must be one of {allowed}, got 'bogus'$"):
         TransferConfig(**{name: "bogus"})
+
+
+NUMBERS = [name for name, _, kind in user_settings() if kind in (int, float)]
+
+
+@pytest.mark.parametrize("name", [n for n in NUMBERS if SETTINGS[n].min is not None or SETTINGS[n].max is not None])
+def test_a_number_outside_its_range_is_refused_when_the_config_is_made(name):
+    """Every number setting's range is its metadata's (the one Blender's properties and the help show)."""
+    meta = SETTINGS[name]
+    outside = meta.min - 1 if meta.min is not None else meta.max + 1
+    with pytest.raises(ValueError, match=f"^{name} must be {meta.range_text()}, got "):
+        TransferConfig(**{name: setting_type(name)(outside)})
+
+
+@pytest.mark.parametrize("name", [n for n in NUMBERS if setting_type(n) is float])
+@pytest.mark.parametrize("value", [float("nan"), float("inf")])
+def test_a_non_finite_number_is_refused(name, value):
+    with pytest.raises(ValueError, match=f"^{name} must be a finite number"):
+        TransferConfig(**{name: value})
 
 
 @pytest.mark.parametrize("preset_name", list(PRESETS))

@@ -1,18 +1,16 @@
-"""Texture-transfer settings, what each one means, and the named presets: the one source of all three.
+"""Texture-transfer settings and what each one means: the one source of both (the presets: ``presets.py``).
 
-Every field of :class:`TransferConfig` carries a :class:`Setting` (label, one-line help in an
-artist's words, unit, range, the part of the method it belongs to). The command line's flags, the
-Blender panel's properties and tooltips, and the panel-to-config map are generated from these, so a
-new setting is written once, here. The paper's value of a setting is read from the ``paper-llff``
-preset, not written again.
+Every field of :class:`TransferConfig` carries a :class:`Setting` (label, one-line help in an artist's words,
+unit, range or choices, the part of the method it belongs to), which also validates it. The command line's
+flags, the Blender panel's properties and tooltips, and the panel-to-config map are generated from these, so a
+new setting is written once, here. The paper's value of a setting is read from the ``paper-llff`` preset.
 """
 
 from __future__ import annotations
 
-import types
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass, fields, replace
-from typing import Any, Literal, Union, get_args, get_origin, get_type_hints
+from typing import Any, get_args, get_type_hints
 
 from .setting import (
     DEGREES,
@@ -25,14 +23,13 @@ from .setting import (
     Setting,
     Switch,
     setting,
+    value_type,
 )
 
 MAX_DEPTH_RATIO = 2.0
-"""Largest measured depth ratio the bank follows: the authors' fixed one. A deeper scene keeps it, so
-the farthest group's texture stays half the nearest's size (128 px at the default height), not a smudge."""
+"""Largest measured depth ratio the bank follows (the authors' fixed one): deeper scenes keep it, not a smudge."""
 FORWARD_SPREAD_DEG = 45.0
-"""Lay Out Texture's automatic projection is View, and Texture Moves Splats is on, when every view looks
-within this angle of the views' mean direction (a capture seen from the front); else Box, and off."""
+"""Views all within this angle of their mean direction are a capture seen from the front (the Auto choices)."""
 
 
 @dataclass(frozen=True)
@@ -458,62 +455,21 @@ class TransferConfig:
     preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1, internal=True)
 
     def __post_init__(self) -> None:
-        positive = (
-            "resolution",
-            "n_views",
-            "n_scales",
-            "n_angles",
-            "texture_height",
-            "preview_every",
-            "rounds",
-            "densify_every",
-        )
-        for name in positive:
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
-        if self.stylise_steps < 0 or self.correct_steps < 0 or self.lr <= 0:
-            raise ValueError(
-                f"need stylise_steps >= 0, correct_steps >= 0 and lr > 0, got {self.stylise_steps}, "
-                f"{self.correct_steps}, {self.lr}"
-            )
-        if not 0.0 <= self.dedup_threshold <= 1.0 or self.match_channels < 0 or self.plateau_window < 0:
-            raise ValueError(
-                f"need 0 <= dedup_threshold <= 1, match_channels >= 0 and plateau_window >= 0, got "
-                f"{self.dedup_threshold}, {self.match_channels}, {self.plateau_window}"
-            )
-        if not 0.0 < self.feature_scale <= 4.0 or not 0.0 <= self.min_new_coverage <= 1.0:
-            raise ValueError(
-                f"need 0 < feature_scale <= 4 and 0 <= min_new_coverage <= 1, got {self.feature_scale}, "
-                f"{self.min_new_coverage}"
-            )
-        if not 0 <= self.stylised_sh_degree <= 3:
-            raise ValueError(f"stylised_sh_degree must be 0..3, got {self.stylised_sh_degree}")
-        if not 0.0 <= self.cell_coverage <= 1.0:
-            raise ValueError(f"cell_coverage must be in 0..1, got {self.cell_coverage}")
-        if self.depth_ratio != 0.0 and not 1.0 <= self.depth_ratio <= 16.0:
-            raise ValueError(f"depth_ratio must be 0 (measured) or 1..16, got {self.depth_ratio}")
-        if self.threads < 0:
-            raise ValueError(f"threads must be >= 0 (0 = one per physical core), got {self.threads}")
-        if self.texture_repeats < 0 or not 0.0 <= self.split_size <= 1.0:
-            raise ValueError(
-                f"need texture_repeats >= 0 and 0 <= split_size <= 1, got {self.texture_repeats}, {self.split_size}"
-            )
-        if not self.split_budget >= 1.0:
-            raise ValueError(f"split_budget must be >= 1 (a multiple of the object's splats), got {self.split_budget}")
-        if self.hidden_threshold < 0:
-            raise ValueError(f"hidden_threshold must be >= 0, got {self.hidden_threshold}")
+        """Refuse a value outside its setting's choices or range (the settings' metadata), naming the setting."""
         for name, meta in SETTINGS.items():
-            if meta.choices and getattr(self, name) not in meta.choices:
-                raise ValueError(f"{name} must be one of {', '.join(meta.choices)}, got {getattr(self, name)!r}")
+            if (problem := meta.problem(getattr(self, name))) is not None:
+                raise ValueError(f"{name} {problem}")
+        if 0.0 < self.depth_ratio < 1.0:
+            raise ValueError(f"depth_ratio must be 0 (measured from the views) or 1..16, got {self.depth_ratio}")
 
     def to_dict(self) -> dict[str, Any]:
+        """Every setting by name (JSON-ready but for the background's tuple)."""
         return asdict(self)
 
     def with_overrides(self, **overrides: Any) -> TransferConfig:
         """A copy with the given fields changed (None values are ignored: 'not given'). A texture height given
         without a repeat count is the size used: it sets ``texture_repeats`` to 0, its "use the size" value."""
-        known = {f.name for f in fields(self)}
-        unknown = set(overrides) - known
+        unknown = set(overrides) - {f.name for f in fields(self)}
         if unknown:
             raise ValueError(f"unknown transfer settings: {', '.join(sorted(unknown))}")
         given = {k: v for k, v in overrides.items() if v is not None}
@@ -537,12 +493,7 @@ def user_settings(where: str | None = None) -> Iterator[tuple[str, Setting, type
 
 def setting_type(name: str) -> type:
     """The value type of setting ``name``: bool, int, float, str (a choice's words, a path) or tuple."""
-    annotation = _HINTS[name]
-    if get_origin(annotation) is Literal:
-        return type(get_args(annotation)[0])
-    if get_origin(annotation) in (Union, types.UnionType):  # an optional path: str | None
-        annotation = next(arg for arg in get_args(annotation) if arg is not type(None))
-    return get_origin(annotation) or annotation
+    return value_type(_HINTS[name])
 
 
 _HINTS = get_type_hints(TransferConfig)

@@ -4,8 +4,10 @@ that take one of a few words."""
 
 from __future__ import annotations
 
+import math
+import types
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, Literal, Union, get_args, get_origin
 
 Switch = Literal["auto", "on", "off"]
 """A setting whose automatic value depends on the scene's views."""
@@ -54,7 +56,47 @@ class Setting:
     internal: bool = False
     """Set by the program, not by users: no CLI flag, no Blender property."""
 
+    def problem(self, value: Any) -> str | None:
+        """Why ``value`` cannot be this setting's (not one of its choices, not finite, outside its range),
+        else None; a colour's components are checked one by one."""
+        if self.choices:
+            return None if value in self.choices else f"must be one of {', '.join(self.choices)}, got {value!r}"
+        for number in value if isinstance(value, tuple) else (value,):
+            if isinstance(number, bool) or not isinstance(number, (int, float)):
+                continue
+            if not math.isfinite(number):
+                return f"must be a finite number, got {value!r}"
+            if (self.min is not None and number < _slack(self.min, -1)) or (
+                self.max is not None and number > _slack(self.max, 1)
+            ):
+                return f"must be {self.range_text()}, got {value!r}"
+        return None
+
+    def range_text(self) -> str:
+        """The allowed range in words: 'between 0 and 1', 'at least 1', 'at most 4'."""
+        if self.min is not None and self.max is not None:
+            return f"between {self.min:g} and {self.max:g}"
+        return f"at least {self.min:g}" if self.min is not None else f"at most {self.max:g}"
+
+
+FLOAT32_SLACK = 1e-6
+"""Relative room at a range's ends: a value read back from Blender's float32 property may sit an ulp outside."""
+
+
+def _slack(bound: float, direction: int) -> float:
+    """``bound`` widened by ``FLOAT32_SLACK`` of itself in ``direction`` (-1 below, +1 above)."""
+    return bound + direction * FLOAT32_SLACK * abs(bound)
+
 
 def setting(default: Any, label: str, help: str, part: str, **meta: Any) -> Any:
     """A dataclass field with its :class:`Setting` (``help`` is the one-line tooltip)."""
     return field(default=default, metadata={"setting": Setting(label, help, part, **meta)})
+
+
+def value_type(annotation: Any) -> type:
+    """The value type of a setting's type hint: a choice's word type, an optional path's str, a generic's origin."""
+    if get_origin(annotation) is Literal:
+        return type(get_args(annotation)[0])
+    if get_origin(annotation) in (Union, types.UnionType):  # an optional path: str | None
+        annotation = next(arg for arg in get_args(annotation) if arg is not type(None))
+    return get_origin(annotation) or annotation
