@@ -19,7 +19,7 @@ from ...core.cameras.cameras_json import save_cameras_json
 from ...core.cameras.files import load_views
 from ...core.cameras.generate import auto_views
 from ...core.device import resolve_device
-from ...core.errors import GT2GSError
+from ...core.errors import GT2GSError, InputFileError
 from ...core.progress import Progress
 from ...core.render import render, resolve_backend
 from ...core.scene.files import read_scene
@@ -134,7 +134,9 @@ def _given_cameras(args: argparse.Namespace) -> list[Camera] | None:
 
 
 def _generated_cameras(args: argparse.Namespace, scene: GaussianScene) -> list[Camera]:
-    """Views generated around the scene."""
+    """Views generated around the scene; an empty one has nothing to place them around."""
+    if len(scene) == 0:
+        raise InputFileError(args.scene, "holds no splats: there is nothing to place generated views around")
     width = args.width or 512
     return auto_views(scene, args.views or 8, width=width, height=args.height or width, kind=args.kind, up=args.up)
 

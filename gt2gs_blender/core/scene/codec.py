@@ -126,7 +126,7 @@ def make_arrays(
     expected = {"means": (n, 3), "quats": (n, 4), "log_scales": (n, 3), "opacity_logits": (n,), "sh_dc": (n, 3)}
     sources = arrays
     with np.errstate(over="ignore", invalid="ignore"):
-        arrays = {key: np.ascontiguousarray(values, np.float32) for key, values in sources.items()}
+        arrays = {key: _own_float32(values) for key, values in sources.items()}
     for key, shape in expected.items():
         if arrays[key].shape != shape:
             raise SplatFormatError(path, f"{key} has shape {arrays[key].shape}, expected {shape}")
@@ -139,6 +139,12 @@ def make_arrays(
         warnings.warn(f"{os.fspath(path)}: dropped {int(bad.sum())} of {n} Gaussians with {why}", stacklevel=3)
         arrays = {key: values[~bad] for key, values in arrays.items()}
     return SplatArrays(**arrays, extras={}, ply_layout=None)
+
+
+def _own_float32(values: np.ndarray) -> np.ndarray:
+    """Contiguous, writable float32 (a view of a file's read-only bytes is copied: torch warns on those)."""
+    out = np.ascontiguousarray(values, np.float32)
+    return out if out.flags.writeable else out.copy()
 
 
 def _invalid_rows(arrays: dict[str, np.ndarray], sources: dict[str, np.ndarray]) -> tuple[np.ndarray, str]:
