@@ -229,3 +229,11 @@ def test_opacity_reset_caps_unfrozen_and_restarts_their_moments():
 def test_unknown_gradient_source_is_rejected():
     with pytest.raises(ValueError, match="gradient source"):
         DensifyConfig(grad_source="depth")
+
+
+def test_the_densification_schedule_is_every_n_steps_past_the_start():
+    """One schedule for photo fitting (3DGS: from step 500, every 100) and the stylise phases (every 25)."""
+    from gt2gs_blender.core.train.densify import densify_due
+
+    assert [s for s in range(1, 101) if densify_due(s, 25)] == [25, 50, 75, 100]
+    assert [s for s in range(1, 1001) if densify_due(s, 100, after=500)] == [600, 700, 800, 900, 1000]

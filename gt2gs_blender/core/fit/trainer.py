@@ -31,7 +31,7 @@ from ..progress import ProgressCallback, Tracker
 from ..render import RenderOutput, render
 from ..scene.gaussians import GaussianScene
 from ..scene.ply_write import write_ply
-from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, reset_opacity
+from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, densify_due, reset_opacity
 from ..train.optim import PARAM_NAMES, GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from ..train.ssim import ssim
@@ -182,7 +182,7 @@ class Trainer:
 
     def _density_control(self) -> None:
         cfg, i = self.config, self.iteration
-        if i > cfg.densify_from and i % cfg.densify_every == 0:
+        if densify_due(i, cfg.densify_every, after=cfg.densify_from):
             densify_and_prune(
                 self.opt,
                 self.stats,

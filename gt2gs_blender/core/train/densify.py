@@ -128,6 +128,12 @@ def apply_structure(
     stats.restructure(source, len(kept))
 
 
+def densify_due(step: int, every: int, after: int = 0) -> bool:
+    """Whether densification runs at ``step`` (counted from 1): every ``every`` steps once past step ``after``,
+    the 3DGS schedule photo fitting and the stylise phases share (each within its own window)."""
+    return step > after and step % every == 0
+
+
 def densify_and_prune(
     opt: GaussianAdam,
     stats: DensityStats,

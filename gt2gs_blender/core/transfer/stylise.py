@@ -33,7 +33,7 @@ from ..cameras.spread import cameras_from_front
 from ..features.extractor import FeatureExtractor
 from ..render import FixedGeometry, RenderOutput, fix_geometry, render
 from ..scene.gaussians import GaussianScene
-from ..train.densify import DensifyConfig, DensityStats, densify_and_prune
+from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, densify_due
 from ..train.optim import GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
@@ -223,7 +223,8 @@ class Styliser:
         self._step(loss)
         self.cursor = (self.cursor + 1) % len(self.order)
         self.report.stylise_steps += 1
-        if densify and self.report.stylise_steps % cfg.densify_every == 0 and len(self.scene) < self.max_gaussians:
+        due = densify_due(self.report.stylise_steps, cfg.densify_every)
+        if densify and due and len(self.scene) < self.max_gaussians:
             done = densify_and_prune(
                 self.opt, self.stats, self.densify_config, self.extent, prune_large=False, generator=self.generator
             )
