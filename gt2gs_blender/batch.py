@@ -57,10 +57,8 @@ def extension_module(name: str):
 
 
 def run(args: argparse.Namespace) -> None:
-    """Import, transfer, export; RuntimeError (the operator's report) or ValueError on failure."""
-    for path, what in ((args.ply, "scene"), (args.texture, "texture")):
-        if not os.path.isfile(path):
-            raise ValueError(f"{path}: {what} file not found")
+    """Import, transfer, export; RuntimeError (the operator's report), ValueError or the engine's error on failure."""
+    check_paths(args)
     if args.weights:
         os.environ["GT2GS_WEIGHTS_DIR"] = os.path.abspath(args.weights)
     bpy.ops.gt2gs.import_ply(filepath=os.path.abspath(args.ply))
@@ -88,13 +86,27 @@ def run(args: argparse.Namespace) -> None:
     print(f"gt2gs: wrote {args.out}")
 
 
+def check_paths(args: argparse.Namespace) -> None:
+    """The command line's rules before any work: the inputs are files, the output overwrites none of them and
+    can be written."""
+    atomic = extension_module("core.atomic")
+    inputs = [("scene", args.ply), ("texture", args.texture)]
+    for what, path in inputs:
+        atomic.require_input(what, path)
+        if not os.path.isfile(path):
+            raise ValueError(f"{path}: {what} file not found")
+    if args.weights:
+        atomic.require_input("weights", args.weights, folder=True)
+    atomic.check_outputs([("--out", args.out)], [*inputs, ("weights", args.weights)])
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the batch job; the exit status (0 ok, 1 failure with one error line)."""
     args = parse_args(script_args(sys.argv) if argv is None else argv)
     ensure_registered()
     try:
         run(args)
-    except (RuntimeError, ValueError) as exc:
+    except (RuntimeError, ValueError, extension_module("core.errors").GT2GSError) as exc:
         message = str(exc).strip().removeprefix("Error: ").strip()
         sys.stderr.write(f"gt2gs: error: {message}\n")
         return 1

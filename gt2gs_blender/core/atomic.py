@@ -52,6 +52,11 @@ def same_file(a: PathLike, b: PathLike) -> bool:
         return False
 
 
+def overwrites(output: PathLike, source: PathLike) -> bool:
+    """Whether writing ``output`` would change the input ``source``: the same file, or a file in its folder."""
+    return same_file(output, source) or (os.path.isdir(source) and os.path.exists(output) and _under(output, source))
+
+
 def require_input(what: str, path: PathLike, *, folder: bool = False) -> None:
     """Refuse an input that is not a regular file (or, with ``folder``, a folder) before it is opened: a pipe
     or a device would block the read. A missing file is left to the reader, which names what it expected."""
@@ -79,7 +84,7 @@ def check_outputs(outputs: Sequence[Named], inputs: Sequence[Named], new_folders
             continue
         path = Path(path)
         for source_what, source in given:
-            if same_file(path, source) or _inside_folder(path, source):
+            if overwrites(path, source):
                 raise InputFileError(path, f"{what} would overwrite the {source_what} ({source}); choose another path")
         for other_what, other in seen:
             if same_file(path, other):
@@ -181,15 +186,10 @@ def _kind(mode: int) -> str:
     return next((words for test, words in _KINDS.items() if test(mode)), "not a regular file")
 
 
-def _under(path: Path, folder: Path) -> bool:
+def _under(path: PathLike, folder: PathLike) -> bool:
     """Whether ``path`` is ``folder`` or inside it (resolved)."""
     resolved, top = os.path.realpath(path), os.path.realpath(folder)
     return resolved == top or resolved.startswith(top.rstrip(os.sep) + os.sep)
-
-
-def _inside_folder(path: Path, source: Path) -> bool:
-    """Whether ``path`` is an existing file inside the input folder ``source`` (writing it would change it)."""
-    return source.is_dir() and path.exists() and _under(path, source)
 
 
 def _require_file_writable(path: Path, *, in_new_folder: bool) -> None:

@@ -54,6 +54,12 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
         "scales and view-dependent colour); off writes them in the object's own space",
         default=False,
     )
+    overwrite_source: BoolProperty(
+        name="Overwrite Imported File",
+        description="Allow writing over the file this object was imported from; otherwise that is refused, so "
+        "the original is never replaced by accident",
+        default=False,
+    )
     ply_format: EnumProperty(
         name="PLY Encoding",
         items=(
@@ -92,6 +98,7 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
             self.report({"ERROR"}, "No Gaussian splat object to export (select a point cloud imported as splats)")
             return {"CANCELLED"}
         try:
+            from ..core.atomic import check_outputs, overwrites
             from ..core.errors import GT2GSError
             from ..core.scene.files import output_format, write_splats
             from ..core.scene.ply_write import write_ply
@@ -101,7 +108,16 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
 
         encoding = ENCODINGS[self.ply_format] or splats.get_meta(obj.data).get("format") or "binary_little_endian"
         path = bpy.path.abspath(self.filepath)
+        source = splats.get_meta(obj.data).get("source")
+        if source and not self.overwrite_source and overwrites(path, source):
+            self.report(
+                {"ERROR"},
+                f"{path}: is the file {obj.name} was imported from; choose another path, or tick Overwrite "
+                "Imported File to replace it",
+            )
+            return {"CANCELLED"}
         try:
+            check_outputs([("the export", path)], [])
             fmt = output_format(path, None if self.file_format == "AUTO" else self.file_format)
             scene, notes = splats.object_to_scene(obj, bake_transform=self.bake_transform)
             if fmt == PLY:

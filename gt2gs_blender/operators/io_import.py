@@ -156,9 +156,11 @@ def read_any(path: str, drop_invalid: bool):
     """A splat file's arrays, and its PLY encoding (None for the other formats); SOG images are decoded by
     Blender, so import needs numpy only."""
     from ..blender.webp import decode_webp
+    from ..core.atomic import require_input
     from ..core.scene.files import PLY, SOG, detect_format, read_splats
     from ..core.scene.ply_header import read_ply_header
 
+    require_input("splat file", path, folder=True)  # a named pipe would block Blender
     fmt = detect_format(path)
     options = {"decode_webp": decode_webp} if fmt == SOG else {}
     encoding = read_ply_header(path).format if fmt == PLY else None
