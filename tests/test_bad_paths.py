@@ -115,7 +115,8 @@ def no_hang(seconds: int = 60) -> Iterator[None]:
 
 def refused(capsys: pytest.CaptureFixture, root: Path, argv: list[str], named: str) -> str:
     """Run the CLI on ``argv``; assert exit 2, one stderr line naming ``named`` (no temp file), no output on
-    stdout (no work started) and every file under ``root`` as it was. The error line."""
+    stdout (no work started) and every file under ``root`` as it was. The error line. With ``capfd`` for
+    ``capsys``, what C libraries print on descriptor 2 counts too."""
     capsys.readouterr()
     before = snapshot(root)
     with no_hang():
@@ -334,6 +335,22 @@ def test_an_input_that_is_no_file_is_refused_without_blocking(capsys, world, cas
     path = make_input(case[1])
     words = {"pipe": "named pipe", "socket": "socket", "device": "device", "folder": "is a folder"}[case[1]]
     assert words in refused(capsys, world, NOT_FILES[case](path), path)
+
+
+# -- 8. one line, without the codecs' own lines ------------------------------------------------------------
+
+
+@pytest.mark.parametrize("cut", [0.02, 0.3, 0.7, 0.99])
+@pytest.mark.parametrize("command", ["transfer", "demo"])
+def test_a_damaged_texture_is_one_line_without_the_codecs_lines(capfd, world, command, cut):
+    noise = np.random.default_rng(0).integers(0, 256, (64, 64, 3), dtype=np.uint8)
+    data = cv2.imencode(".png", noise)[1].tobytes()
+    Path("damaged.png").write_bytes(data[: int(len(data) * cut)])
+    argv = {
+        "transfer": transfer_argv("out.ply", "scene.ply", "damaged.png"),
+        "demo": ["demo", "--scene", "scene.ply", "--texture", "damaged.png", "--out", "d", *FAST],
+    }[command]
+    refused(capfd, world, argv, "damaged.png")
 
 
 # -- all or nothing --------------------------------------------------------------------------------------

@@ -69,9 +69,9 @@ def cmd_demo(args: argparse.Namespace) -> None:
         new_folders=[args.out],
     )
     scene, source = _demo_scene(scene_path, args.drop_invalid)
+    image = stripes_texture() if texture is None else load_texture(texture)
     print(f"scene: {source} ({len(scene):,} Gaussians)")
     print(f"texture: {texture or 'generated stripes (the shared textures are absent)'}")
-    image = stripes_texture() if texture is None else load_texture(texture)
     if args.weights_path is None and not os.environ.get(ENV_VAR) and SHARED_WEIGHTS.is_dir():
         args.weights_path = str(SHARED_WEIGHTS)
     config = config_from_args(args)

@@ -20,8 +20,11 @@ Choices:
 
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
 import warnings
+from collections.abc import Iterator
 
 import cv2
 import numpy as np
@@ -57,7 +60,8 @@ def load_texture(path: str | os.PathLike) -> np.ndarray:
 def _decode(data: np.ndarray, path: str | os.PathLike) -> np.ndarray:
     """Decode with OpenCV, keeping alpha when there is some, else applying the EXIF orientation."""
     try:
-        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        with _native_stderr_hidden():
+            image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     except cv2.error as exc:  # codecs refuse some files with an exception rather than None
         raise InputFileError(path, _codec_problem(str(exc))) from None
     if (image is None or image.size == 0) and data[:4].tobytes() == b"GIF8":
@@ -66,8 +70,28 @@ def _decode(data: np.ndarray, path: str | os.PathLike) -> np.ndarray:
         raise InputFileError(path, "not an image file OpenCV can decode (texture expected: PNG, JPEG, TIFF, ...)")
     if image.ndim == 3 and image.shape[2] in (2, 4):
         return image
-    oriented = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
+    with _native_stderr_hidden():
+        oriented = cv2.imdecode(data, cv2.IMREAD_ANYDEPTH | cv2.IMREAD_ANYCOLOR)
     return image if oriented is None else oriented
+
+
+@contextlib.contextmanager
+def _native_stderr_hidden() -> Iterator[None]:
+    """Hide what the codecs' C code prints on file descriptor 2 (libpng's "PNG input buffer is incomplete",
+    OpenCV's warnings): the one error line that follows says it in the user's terms."""
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # no descriptor 2 (a GUI process on Windows): nothing to hide
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def _codec_problem(message: str) -> str:
