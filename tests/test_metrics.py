@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -145,3 +146,47 @@ def test_fps_and_peak_memory():
     assert metrics.render_fps(wall_scene(10), sliding_cameras(2), backend="torch") > 0
     memory = metrics.peak_memory_mib()
     assert memory["rss_peak_mib"] > 10 and memory["cuda_peak_mib"] is None
+
+
+def _photo(seed: int, size: int = 64) -> torch.Tensor:
+    """A smooth random (size, size, 3) image in [0, 1] with detail at several scales."""
+    g = np.random.default_rng(seed)
+    coarse = cv2.resize(g.random((8, 8, 3)).astype(np.float32), (size, size), interpolation=cv2.INTER_CUBIC)
+    return torch.from_numpy(np.clip(0.7 * coarse + 0.3 * g.random((size, size, 3)), 0.0, 1.0).astype(np.float32))
+
+
+def test_object_ssim_of_identical_renders_is_one_and_over_the_whole_frame_is_the_papers_ssim():
+    a, b = _photo(0)[None], _photo(1)[None]
+    everywhere = torch.ones(1, 64, 64, dtype=torch.bool)
+    assert metrics.object_ssim(a, a, everywhere) == pytest.approx(1.0, abs=1e-6)
+    assert metrics.object_ssim(a, b, everywhere) == pytest.approx(metrics.content_ssim(a, b), abs=1e-6)
+    assert metrics.object_ssim(a, b, torch.zeros(1, 64, 64, dtype=torch.bool)) is None
+
+
+def test_object_ssim_counts_only_the_objects_pixels():
+    """A changed backdrop does not count; a changed object does, however small it is in the frame."""
+    original = torch.ones(1, 64, 64, 3)
+    original[0, 24:40, 24:40] = _photo(2, 16)
+    covered = torch.zeros(1, 64, 64, dtype=torch.bool)
+    covered[0, 24:40, 24:40] = True
+    new_backdrop, new_object = original.clone(), original.clone()
+    new_backdrop[0, :8] = 0.0
+    new_object[0, 24:40, 24:40] = _photo(3, 16)
+    assert metrics.object_ssim(new_backdrop, original, covered) == pytest.approx(1.0, abs=1e-6)
+    assert metrics.object_ssim(new_object, original, covered) < 0.5 < metrics.content_ssim(new_object, original)
+
+
+def test_the_blurred_object_ssim_is_the_ssim_of_opencv_blurred_renders():
+    """The oracle: OpenCV's Gaussian blur (float64, mirrored edges) at the object's-scale sigma, then SSIM."""
+    a, b = _photo(4), _photo(5)
+    covered = torch.ones(64, 64, dtype=torch.bool)
+    sigma = metrics.OBJECT_BLUR * 64.0
+    side = 2 * int(np.ceil(3.0 * sigma)) + 1  # the kernel OpenCV makes for 8-bit images (3 sigma each side)
+    blur = lambda x: torch.from_numpy(
+        cv2.GaussianBlur(x.double().numpy(), (side, side), sigma, borderType=cv2.BORDER_REFLECT_101)
+    ).float()
+    expected = metrics.content_ssim(blur(a)[None], blur(b)[None])
+    assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) == pytest.approx(expected, abs=1e-5)
+    assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) > metrics.object_ssim(
+        a[None], b[None], covered[None]
+    )

@@ -66,8 +66,12 @@ def report_rows(
     metrics = report.get("metrics") or {}
     if metrics.get("texture_match") is not None and metrics.get("texture_match_start") is not None:
         rows.append(("Texture Match", f"{metrics['texture_match_start']:.3f} → {metrics['texture_match']:.3f}"))
+    if metrics.get("object_ssim") is not None:
+        rows.append(("Scene Kept (SSIM)", f"{metrics['object_ssim']:.3f}"))
+    if metrics.get("object_ssim_blurred") is not None:
+        rows.append(("Parts Kept (SSIM)", f"{metrics['object_ssim_blurred']:.3f}"))
     if metrics.get("ssim") is not None:
-        rows.append(("Shape Kept (SSIM)", f"{metrics['ssim']:.3f}"))
+        rows.append(("Frame SSIM (Paper)", f"{metrics['ssim']:.3f}"))
     if metrics.get("preview_ssim") is not None:
         rows.append(("Like the Preview (SSIM)", f"{metrics['preview_ssim']:.3f}"))
     return rows

@@ -360,7 +360,14 @@ def test_transfer_view_in_each_state():
         "image_size": [128, 128],
         "device": "cpu",
         "weights": {"spec": "vgg19_norm_relu3", "fallback": False},
-        "metrics": {"texture_match_start": 0.3, "texture_match": 0.2, "ssim": 0.81, "preview_ssim": 0.62},
+        "metrics": {
+            "texture_match_start": 0.3,
+            "texture_match": 0.2,
+            "ssim": 0.81,
+            "object_ssim": 0.42,
+            "object_ssim_blurred": 0.73,
+            "preview_ssim": 0.62,
+        },
     }
     outcome = transfer_run.Outcome(DONE, "done in 15 s", report, "donut GT²", 15.2, mode="IN_PLACE")
     done = transfer_view("donut", None, outcome)
@@ -368,7 +375,8 @@ def test_transfer_view_in_each_state():
     assert done.state == DONE and done.message == "Done in 15 s" and done.progress is None
     assert rows["Time"] == "15 s (texture transfer 12 s)"  # the wait the user saw, beside the engine's part
     assert rows["Result"] == "'donut GT²' (no longer in the file)" and rows["Splats"] == "45,624"
-    assert rows["Views"] == "8 at 128×128" and rows["Shape Kept (SSIM)"] == "0.810"
+    assert rows["Views"] == "8 at 128×128" and rows["Frame SSIM (Paper)"] == "0.810"
+    assert rows["Scene Kept (SSIM)"] == "0.420" and rows["Parts Kept (SSIM)"] == "0.730"
     assert rows["Texture Match"] == "0.300 → 0.200" and rows["Weights"] == "vgg19_norm_relu3"
     assert rows["Like the Preview (SSIM)"] == "0.620"
     assert result_view(None, "", "").message == NO_RUN_TEXT

@@ -29,7 +29,7 @@ from .config import TransferConfig
 from .content import content_degree
 from .detail import add_detail, split_for_detail
 from .layout import lay_out, layout_images, layout_shading, shade_width
-from .metrics import preview_ssim
+from .metrics import COVERED, preview_ssim
 from .orientation_preview import show
 from .plan import RunPlan, plan_run
 from .region import assemble, structure_changed
@@ -277,6 +277,7 @@ def _evaluate(
         lpips=lpips,
         extractor=extractor,
         bank_features=bank.features,
+        covered=torch.stack(content.alphas) > COVERED,
     )
     # the metric's own covered cells and background (as for the result), whatever the texture loss used
     start_features = torch.cat(
