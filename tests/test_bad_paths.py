@@ -356,6 +356,10 @@ def test_a_damaged_texture_is_one_line_without_the_codecs_lines(capfd, world, co
 # -- all or nothing --------------------------------------------------------------------------------------
 
 
+def test_transfer_to_a_format_it_cannot_write_is_refused_before_any_work(capsys, world):
+    assert "read only" in refused(capsys, world, transfer_argv("out.sog"), "out.sog")
+
+
 def test_transfer_whose_last_output_fails_leaves_none(capsys, world, monkeypatch):
     def no_strip(*_: object) -> None:
         raise OSError(28, "No space left on device", "strip.png")

@@ -10,7 +10,7 @@ from ...core.atomic import Named, all_or_nothing, check_outputs, require_input
 from ...core.cameras.camera import Camera
 from ...core.cameras.files import load_views
 from ...core.cameras.llff import load_llff
-from ...core.scene.files import read_scene
+from ...core.scene.files import output_format, read_scene
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
 from .args import render_options, scene_input, scene_options
@@ -62,6 +62,7 @@ def check_paths(args: argparse.Namespace) -> list[Named]:
     given = (("-o", args.output), ("--report", args.report), ("--strip", args.strip))
     outputs = [(what, path) for what, path in given if path is not None]
     check_outputs(outputs, inputs)
+    output_format(args.output)  # a format the tools write (SOG is read only)
     return outputs
 
 
