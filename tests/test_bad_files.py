@@ -25,7 +25,7 @@ from gt2gs_blender.core.scene.files import WRITERS, read_splats, write_splats
 from gt2gs_blender.core.transfer.texture import load_texture
 
 from .splat_tools import synthetic_scene
-from .test_fuzz_readers import ENDINGS, sog_bomb, spz_bomb, spz_v4_bomb
+from .test_fuzz_readers import BOMB_IDS, BOMBS, ENDINGS
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -180,16 +180,7 @@ def test_rendering_an_empty_scene_is_one_error_naming_it(tmp_path, capsys, endin
 
 
 @pytest.mark.parametrize("command", ["info", "render", "convert"])
-@pytest.mark.parametrize(
-    ("make", "fragment"),
-    [
-        (lambda folder: sog_bomb(folder / "bomb.sog"), "meta.json: declares 5368053780 bytes uncompressed"),
-        (lambda folder: spz_bomb(folder / "bomb.spz", 2**32 - 1), "(4294967295 points of SH degree 3)"),
-        (lambda folder: spz_bomb(folder / "mid.spz", 3_000_000), "(3000000 points of SH degree 3)"),
-        (lambda folder: spz_v4_bomb(folder / "v4.spz"), "(4294967295 points of SH degree 3)"),
-    ],
-    ids=["sog", "spz", "spz-mid", "spz-v4"],
-)
+@pytest.mark.parametrize(("make", "fragment"), BOMBS, ids=BOMB_IDS)
 def test_a_decompression_bomb_is_one_error_naming_it_and_its_declared_size(tmp_path, capsys, make, fragment, command):
     bomb = make(tmp_path)
     extra = {"info": [], "render": ["-o", tmp_path / "views"], "convert": [tmp_path / "out.ply"]}[command]

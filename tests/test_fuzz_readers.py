@@ -267,16 +267,17 @@ def spz_v4_bomb(path: Path) -> Path:
     return path
 
 
-@pytest.mark.parametrize(
-    ("make", "fragment"),
-    [
-        (lambda folder: sog_bomb(folder / "bomb.sog"), "meta.json: declares 5368053780 bytes uncompressed"),
-        (lambda folder: spz_bomb(folder / "bomb.spz", 2**32 - 1), "(4294967295 points of SH degree 3)"),
-        (lambda folder: spz_bomb(folder / "mid.spz", 3_000_000), "(3000000 points of SH degree 3)"),
-        (lambda folder: spz_v4_bomb(folder / "v4.spz"), "(4294967295 points of SH degree 3)"),
-    ],
-    ids=["sog-webp-headers", "spz-huge-count", "spz-count-beyond-the-ratio", "spz-v4-count"],
-)
+BOMBS = [
+    (lambda folder: sog_bomb(folder / "bomb.sog"), "meta.json: declares 5368053780 bytes uncompressed"),
+    (lambda folder: spz_bomb(folder / "bomb.spz", 2**32 - 1), "(4294967295 points of SH degree 3)"),
+    (lambda folder: spz_bomb(folder / "mid.spz", 3_000_000), "(3000000 points of SH degree 3)"),
+    (lambda folder: spz_v4_bomb(folder / "v4.spz"), "(4294967295 points of SH degree 3)"),
+]
+"""(make the file in a folder, what its one-line refusal says): SOG WebP headers, SPZ counts, an SPZ v4 count."""
+BOMB_IDS = ["sog-webp-headers", "spz-huge-count", "spz-count-beyond-the-ratio", "spz-v4-count"]
+
+
+@pytest.mark.parametrize(("make", "fragment"), BOMBS, ids=BOMB_IDS)
 def test_decompression_bombs_are_refused_from_their_headers_under_a_memory_limit(tmp_path, make, fragment):
     path = make(tmp_path)
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
