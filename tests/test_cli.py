@@ -417,3 +417,20 @@ def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):
     )
     assert code == 2
     assert_one_line_error(err, str(region))
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["convert", "in.ply", ""],
+        ["transfer", "s.ply", "t.png", "-o", ""],
+        ["render", "", "--out", "views"],
+        ["info", ""],
+        ["transfer", "s.ply", "t.png", "-o", "o.ply", "--report", ""],
+    ],
+)
+def test_an_empty_file_name_is_one_line_not_the_current_folder(capsys, argv):
+    """argparse would turn '' into Path('.'), the current folder: refused first, saying which argument."""
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"gt2gs: error: '' (argument {argv.index('') + 1}): an empty file name or value; give one"

@@ -33,6 +33,9 @@ EXIT_INTERNAL, EXIT_USER = 1, 2
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; return the exit status (0 success, 2 user error, 1 internal error)."""
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if "" in argv:  # argparse's Path('') is the current folder: an empty name would silently become '.'
+        return _fail(False, f"'' (argument {argv.index('') + 1}): an empty file name or value; give one", EXIT_USER)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a usage error argparse already printed (2)
