@@ -890,3 +890,40 @@ def test_camera_path_through_an_orbit_turns_like_a_denser_orbit() -> None:
     )
     with pytest.raises(ValueError, match="180 degrees"):
         camera_path([coarse[0], flipped], 2)
+
+
+@pytest.mark.parametrize(
+    "name, vector", [("+z", (0, 0, 1)), ("-y", (0, -1, 0)), ("+y", (0, 1, 0)), ("-x", (-1, 0, 0)), ("x", (1, 0, 0))]
+)
+def test_automatic_views_stand_on_the_named_up_axis(name, vector):
+    """A capture with -Y up (a 3DGS trainer's) stands upright in views made around --up=-y: every camera sits
+    at one height along the axis, above the centre (20 degrees of elevation), its screen's up along the axis."""
+    from .test_transfer import blob_scene
+
+    up = np.asarray(vector, float)
+    cameras = auto_views(blob_scene(400), 6, up=name)
+    lo, hi = (b.double().numpy() for b in blob_scene(400).bounds(0.98))
+    heights = [float((c.center - (lo + hi) / 2) @ up) for c in cameras]
+    assert min(heights) > 0 and max(heights) - min(heights) < 1e-6 * max(heights)
+    assert all(float(-c.world_to_cam[1, :3] @ up) > math.cos(math.radians(21)) for c in cameras)
+
+
+def test_an_unknown_up_axis_is_refused():
+    from gt2gs_blender.core.cameras.generate import axis_vector
+
+    assert axis_vector("-y") == (0.0, -1.0, 0.0) and axis_vector("z") == (0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match="an axis such as"):
+        axis_vector("w")
+
+
+def test_the_run_plans_its_automatic_views_around_the_up_setting():
+    """The transfer's Up Axis reaches its views: the plan's cameras are auto_views' around that axis."""
+    from gt2gs_blender.core.transfer.config import TransferConfig
+    from gt2gs_blender.core.transfer.plan import plan_run
+
+    from .test_transfer import blob_scene
+
+    scene, config = blob_scene(400), TransferConfig(up="-y", resolution=64, n_views=5, layout=False)
+    plan = plan_run(scene, np.full((16, 16, 3), 0.5, np.float32), None, config, preview=True)
+    expected = auto_views(scene, 5, width=64, height=64, up="-y")
+    assert [c.world_to_cam.tolist() for c in plan.cameras] == [c.world_to_cam.tolist() for c in expected]

@@ -434,3 +434,19 @@ def test_an_empty_file_name_is_one_line_not_the_current_folder(capsys, argv):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err == f"gt2gs: error: '' (argument {argv.index('') + 1}): an empty file name or value; give one"
+
+
+def test_the_before_after_strip_shows_the_run_s_own_cameras_when_given():
+    """A capture's strip is four of its own views, spread over them, at the strip's size; else a ring about up."""
+    from gt2gs_blender.app.jobs import STRIP_SIZE, strip_cameras
+    from gt2gs_blender.core.cameras.generate import auto_views
+
+    from .test_transfer import blob_scene
+
+    scene = blob_scene(300)
+    given = auto_views(scene, 10, width=400, height=300)
+    picked = strip_cameras(scene, given, "+z")
+    assert [c.name for c in picked] == [given[i].name for i in (0, 2, 5, 7)]
+    assert all(max(c.width, c.height) == STRIP_SIZE for c in picked)
+    ring = strip_cameras(scene, None, "-y")
+    assert all(float(-c.world_to_cam[1, :3] @ np.array([0.0, -1.0, 0.0])) > 0.8 for c in ring)

@@ -118,10 +118,27 @@ def summary(report: dict) -> str:
     return "\n".join(lines)
 
 
+def strip_cameras(original: GaussianScene, views: Sequence[Camera] | int | None, up: str) -> list[Camera]:
+    """The before/after strip's views: four of the run's own cameras, spread over them, when it was given
+    cameras (a capture seen as it was taken); else a ring around the ``up`` axis."""
+    if views is None or isinstance(views, int):
+        return auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0, up=up)
+    cameras = list(views)
+    picked = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(min(STRIP_VIEWS, len(cameras)))]
+    return [c.scaled(STRIP_SIZE / max(c.width, c.height)) for c in picked]
+
+
 @torch.no_grad()
-def write_before_after(path: Path, original: GaussianScene, stylised: GaussianScene, texture: np.ndarray) -> None:
-    """A PNG: the texture, then the original (top) and stylised (bottom) scene from 4 views."""
-    cams = auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0)
+def write_before_after(
+    path: Path,
+    original: GaussianScene,
+    stylised: GaussianScene,
+    texture: np.ndarray,
+    views: Sequence[Camera] | int | None = None,
+    up: str = "+z",
+) -> None:
+    """A PNG: the texture, then the original (top) and stylised (bottom) scene from the strip's views."""
+    cams = strip_cameras(original, views, up)
     rows = [render(s, cams, background=(1.0, 1.0, 1.0)).colors.clamp(0, 1) for s in (original, stylised)]
     tiles = [torch.cat(list(r), dim=1) for r in rows]
     swatch = torch.from_numpy(cv2.resize(texture, (STRIP_SIZE, STRIP_SIZE), interpolation=cv2.INTER_AREA))

@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
+from typing import get_args
 
 from ...core.atomic import Named, require_input
 from ...core.scene.files import SOG_META
 from ...core.transfer.config import SETTINGS
+from ...core.transfer.setting import UpAxis
 
 
 def positive_int(text: str) -> int:
@@ -51,8 +53,10 @@ def color(text: str) -> tuple[float, float, float]:
 
 
 def up(text: str) -> str | tuple[float, float, float]:
-    """'auto' or an 'x,y,z' vector."""
-    return "auto" if text == "auto" else floats(text, 3, "'auto' or a vector x,y,z")  # type: ignore[return-value]
+    """'auto', an axis ('+z', '-y', ...: the transfer's Up Axis choices) or an 'x,y,z' vector."""
+    if text in get_args(UpAxis):
+        return text
+    return floats(text, 3, "'auto', an axis such as +z or -y, or a vector x,y,z")  # type: ignore[return-value]
 
 
 def scene_input(path: Path | None) -> list[Named]:

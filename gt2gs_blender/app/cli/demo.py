@@ -79,7 +79,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
     with all_or_nothing(files, new_folders=[args.out]):
         with TerminalProgress("demo") as bar:
             result = run_transfer(scene, image, None, config, stylised, report=report, progress=bar, scene_name=source)
-        write_before_after(strip, scene, result.scene, image)
+        write_before_after(strip, scene, result.scene, image, None, config.up)
     print(summary(result.report))
     print(f"wrote {stylised}, {strip} and {report}")
 

@@ -70,8 +70,9 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         "--up",
         type=up,
         default=(0.0, 0.0, 1.0),
-        metavar="auto|X,Y,Z",
-        help="the scene's up axis for generated views (default: 0,0,1, Blender's)",
+        metavar="auto|AXIS|X,Y,Z",
+        help="the scene's up axis for generated views: +z (the default, Blender's), -y (a 3DGS trainer's "
+        "capture: write --up=-y), any signed axis, auto (estimated from the splats) or a vector x,y,z",
     )
     p.add_argument("--depth", action="store_true", help="also write 16-bit depth PNGs (DIR/depth_000.png, ...)")
     p.set_defaults(run=cmd_render)

@@ -98,7 +98,7 @@ def _transfer(args: argparse.Namespace) -> dict:
             views_name=_views_source(args),
         )
     if args.strip is not None:
-        write_before_after(args.strip, scene, result.scene, texture)
+        write_before_after(args.strip, scene, result.scene, texture, views, config.up)
     return result.report
 
 

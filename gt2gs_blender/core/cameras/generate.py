@@ -216,6 +216,16 @@ def estimate_up_axis(
     return axis if axis @ prefer_v >= 0 else -axis
 
 
+def axis_vector(name: str) -> tuple[float, float, float]:
+    """The unit vector of an axis named by an optional sign and x, y or z ('+z', '-y', 'x')."""
+    sign, letter = (name[0], name[1:]) if name[:1] in "+-" else ("+", name)
+    if letter not in ("x", "y", "z"):
+        raise ValueError(f"up must be a 3-vector, 'auto' or an axis such as +z or -y, got {name!r}")
+    vector = [0.0, 0.0, 0.0]
+    vector["xyz".index(letter)] = -1.0 if sign == "-" else 1.0
+    return (vector[0], vector[1], vector[2])
+
+
 def auto_views(
     scene: GaussianScene,
     n: int,
@@ -236,8 +246,8 @@ def auto_views(
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
     long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
     forward-facing arc on the -y side, Blender's front) or "auto" (= orbit: a lone object has no
-    known front). ``up`` is a vector (world +z, Blender's convention, by default) or "auto" for
-    :func:`estimate_up_axis`.
+    known front). ``up`` is a vector (world +z, Blender's convention, by default), an axis name
+    (:func:`axis_vector`) or "auto" for :func:`estimate_up_axis`.
     """
     if kind not in ("auto", "orbit", "arc"):
         raise ValueError(f"kind must be 'auto', 'orbit' or 'arc', got {kind!r}")
@@ -246,11 +256,11 @@ def auto_views(
     lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
     center = (lo + hi) / 2.0
     sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
-    if isinstance(up, str):
-        if up != "auto":
-            raise ValueError(f"up must be a 3-vector or 'auto', got {up!r}")
+    if up == "auto":
         means = scene.means.detach().double().cpu().numpy()
         up = estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
+    elif isinstance(up, str):
+        up = axis_vector(up)
     fov_x = math.radians(fov_deg)
     fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
     make = arc_views if kind == "arc" else orbit_views

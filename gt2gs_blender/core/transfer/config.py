@@ -12,16 +12,14 @@ from collections.abc import Iterator
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, get_args, get_type_hints
 
+from .machine import MachineSettings
 from .setting import (
     DEGREES,
-    IN_PREFERENCES,
     PARTS,
-    Device,
-    FeatureNetwork,
     Projection,
-    Rasterizer,
     Setting,
     Switch,
+    UpAxis,
     setting,
     value_type,
 )
@@ -33,8 +31,8 @@ FORWARD_SPREAD_DEG = 45.0
 
 
 @dataclass(frozen=True)
-class TransferConfig:
-    """Every setting of a transfer run. Loss weights follow the paper's names (lambda_*)."""
+class TransferConfig(MachineSettings):
+    """Every setting of a transfer run (the machine's first). Loss weights follow the paper's names (lambda_*)."""
 
     # -- views
     resolution: int = setting(
@@ -48,6 +46,14 @@ class TransferConfig:
         min=1,
         soft_max=64,
         flag="--views",
+    )
+    up: UpAxis = setting(
+        "+z",
+        "Up Axis",
+        "The scene's up direction, for automatic views: +Z in Blender, often -Y for a capture from a 3DGS "
+        "trainer, whose cameras have -Y up (on the command line: --up=-y); Auto estimates it from the splats",
+        "views",
+        choices=get_args(UpAxis),
     )
     feature_scale: float = setting(
         0.5, "Feature Scale", "Renders are resized by this before the feature network", "views", min=0.05, max=4.0
@@ -395,62 +401,6 @@ class TransferConfig:
     )
     evaluate: bool = setting(
         True, "Measure Result", "Measure consistency, content and texture match at the end", "speed"
-    )
-    # -- machine
-    mixed_precision: bool = setting(
-        True,
-        "Mixed Precision",
-        "Run the feature network in float16 on a CUDA GPU (the CPU always uses float32)",
-        "machine",
-        blender=IN_PREFERENCES,
-    )
-    features: FeatureNetwork = setting(
-        "auto",
-        "Feature Network",
-        "Which feature network to use (auto: the best one found)",
-        "machine",
-        blender=IN_PREFERENCES,
-        choices=get_args(FeatureNetwork),
-    )
-    weights_path: str | None = setting(
-        None,
-        "Weights",
-        "VGG weights file or folder (default: $GT2GS_WEIGHTS_DIR, then torch's cache)",
-        "machine",
-        flag="--weights",
-        blender=IN_PREFERENCES,
-    )
-    device: Device = setting(
-        "auto",
-        "Device",
-        "Where the run computes: auto = CUDA when available",
-        "machine",
-        blender=IN_PREFERENCES,
-        choices=get_args(Device),
-    )
-    threads: int = setting(
-        0,
-        "CPU Threads",
-        "CPU threads for the run (0 = one per physical core); fewer keeps Blender responsive",
-        "machine",
-        min=0,
-        soft_max=64,
-        blender=IN_PREFERENCES,
-    )
-    backend: Rasterizer = setting(
-        "auto",
-        "Rasterizer",
-        "Rasterizer backend (auto = the fastest available)",
-        "machine",
-        blender=IN_PREFERENCES,
-        choices=get_args(Rasterizer),
-    )
-    cache_dir: str | None = setting(
-        None,
-        "Bank Cache Folder",
-        "Where texture banks are cached (default: $GT2GS_CACHE_DIR, else ~/.cache/gt2gs_blender/banks)",
-        "machine",
-        blender=IN_PREFERENCES,
     )
     preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1, internal=True)
 

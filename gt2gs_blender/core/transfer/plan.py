@@ -94,7 +94,7 @@ def plan_run(
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
     framed = original if selected is None else original.subset(selected)
-    cameras = fit_cameras(framed, views, config.resolution, config.n_views)
+    cameras = fit_cameras(framed, views, config.resolution, config.n_views, config.up)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     start = stylise_start(original, selected, config.stylised_sh_degree)
     content = hidden = frame = None

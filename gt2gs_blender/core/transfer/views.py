@@ -56,11 +56,12 @@ class ViewSet:
 
 
 def fit_cameras(
-    scene: GaussianScene, views: Sequence[Camera] | int | None, resolution: int, n_default: int
+    scene: GaussianScene, views: Sequence[Camera] | int | None, resolution: int, n_default: int, up: str = "+z"
 ) -> list[Camera]:
-    """Automatic views (a count or None) or the given cameras resized so their longest side is ``resolution``."""
+    """Automatic views (a count or None) around the ``up`` axis, or the given cameras resized so their longest
+    side is ``resolution``."""
     if views is None or isinstance(views, int):
-        return auto_views(scene, views or n_default, width=resolution, height=resolution)
+        return auto_views(scene, views or n_default, width=resolution, height=resolution, up=up)
     cameras = list(views)
     if not cameras:
         raise GT2GSError("no views given: pass cameras or a number of automatic views")

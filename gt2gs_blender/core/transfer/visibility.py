@@ -56,7 +56,7 @@ def require_visible(
     scene = scene.detach().to(device)
     selected = region_mask(region, n, device)
     cameras = fit_cameras(
-        scene if selected is None else scene.subset(selected), views, config.resolution, config.n_views
+        scene if selected is None else scene.subset(selected), views, config.resolution, config.n_views, config.up
     )
     if visible_in_any(scene, cameras, config.backend):
         return
