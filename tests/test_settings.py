@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from gt2gs_blender.app.cli import main as cli
@@ -71,7 +73,7 @@ def test_cli_options_become_the_config(argv, expected):
 @pytest.mark.parametrize("name", [name for name, meta in SETTINGS.items() if meta.choices])
 def test_a_bogus_choice_is_refused_when_the_config_is_made(name):
     """Every choice setting, not a hand-written list of them: refused at construction, naming the allowed words."""
-    allowed = ", ".join(SETTINGS[name].choices)
+    allowed = re.escape(", ".join(SETTINGS[name].choices))
     with pytest.raises(ValueError, match=f"^{name} must be one of {allowed}, got 'bogus'$"):
         TransferConfig(**{name: "bogus"})
 
