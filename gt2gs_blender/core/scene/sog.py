@@ -141,7 +141,7 @@ class _Source:
                     return f.read(size)
             with self.archive.open(_entry(self, name)) as f:
                 return f.read(size)
-        except (OSError, zipfile.BadZipFile, EOFError, NotImplementedError, RuntimeError, ValueError) as exc:
+        except ZIP_ERRORS as exc:
             raise self.error(name, f"cannot be read ({exc})") from None
 
     def stored_size(self, name: str) -> int:
@@ -167,6 +167,11 @@ class _Source:
             raise self.error(META_NAME, f"file name {name!r} is not a plain name beside meta.json")
 
 
+ZIP_ERRORS = (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, RuntimeError, ValueError)
+"""What reading a damaged zip entry raises: a bad archive, a truncated stream, a compression method zipfile
+does not implement (NotImplementedError), an encrypted entry (RuntimeError), a corrupt deflate stream."""
+
+
 def _entry(source: _Source, name: str) -> zipfile.ZipInfo:
     """A zip entry by name; a missing one is an error naming it."""
     try:
@@ -183,7 +188,7 @@ def _read_entry(source: _Source, name: str) -> bytes:
         raise source.error(name, f"declares {info.file_size} bytes uncompressed, over the {limit}-byte limit")
     try:
         return source.archive.read(info)
-    except (zipfile.BadZipFile, OSError, EOFError, NotImplementedError, RuntimeError, ValueError) as exc:
+    except ZIP_ERRORS as exc:
         raise source.error(name, f"cannot be extracted ({exc})") from None
 
 
