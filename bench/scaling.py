@@ -38,7 +38,7 @@ from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.features.extractor import load_feature_extractor
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.ply import read_ply
-from gt2gs_blender.core.transfer.bank import BANK_MAX_CROP
+from gt2gs_blender.core.transfer.bank import bank_crop
 from gt2gs_blender.core.transfer.content import contributions, hidden_gaussians
 from gt2gs_blender.core.transfer.presets import preset
 from gt2gs_blender.core.transfer.stylise import Styliser, order_and_link
@@ -89,7 +89,7 @@ def time_steps(scene: GaussianScene, resolution: int, steps: int, extractor, tex
         extractor_id="scaling",
         n_scales=4,
         n_angles=config.n_angles,
-        max_crop=BANK_MAX_CROP,
+        max_crop=bank_crop(extractor.spec),
     )
     styliser = Styliser(scene, targets, order, bank, extractor, config, background)
     stylise_s, correct_s = [], []
@@ -126,7 +126,7 @@ def hidden_ab(
         extractor_id="scaling",
         n_scales=4,
         n_angles=config.n_angles,
-        max_crop=BANK_MAX_CROP,
+        max_crop=bank_crop(extractor.spec),
     )
     weight = contributions(scene, cameras, config.backend)
 

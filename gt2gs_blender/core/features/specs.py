@@ -97,6 +97,31 @@ class FeatureSpec:
         """Network-input pixels per feature cell along each axis (2 ** pools before the deepest tap)."""
         return 2 ** sum(kind == "pool" for kind, *_ in self.stack[: self.depth])
 
+    def cell_reach(self) -> tuple[int, int]:
+        """The input pixels cell j of the concatenated feature map reads: ``stride * j + before`` to
+        ``stride * j + after`` (both included; before < 0). Each 3x3 convolution (padding 1) widens a
+        tap's span by its stride on each side, each 2x2 pool doubles the stride and adds one stride after;
+        a shallower tap is resized to the deepest tap's grid by antialiased bilinear downscaling, whose
+        output cell j reads that tap's cells ``f*j - f/2`` to ``f*j + 3f/2 - 1`` (f the stride ratio, as torch's
+        ``interpolate(antialias=True)``). Pixels outside the image are padding: a cell whose span stays
+        inside the image is the same as that patch's cell inside any larger image."""
+        spans: dict[str, tuple[int, int, int]] = {}
+        stride, before, after = 1, 0, 0
+        for kind, name, *_ in self.stack[: self.depth]:
+            if kind == "conv":
+                before, after = before - stride, after + stride
+            elif kind == "pool":
+                stride, after = stride * 2, after + stride
+            elif name in self.taps:
+                spans[name] = (stride, before, after)
+        lows, highs = [], []
+        for tap_stride, tap_before, tap_after in spans.values():
+            ratio = stride // tap_stride
+            first, last = (0, 0) if ratio == 1 else (-(ratio // 2), 3 * ratio // 2 - 1)
+            lows.append(tap_stride * first + tap_before)
+            highs.append(tap_stride * last + tap_after)
+        return min(lows), max(highs)
+
     def parameter_shapes(self) -> dict[str, tuple[int, ...]]:
         """State-dict keys (``features.N.weight/bias``) the network up to the deepest tap needs."""
         out: dict[str, tuple[int, ...]] = {}

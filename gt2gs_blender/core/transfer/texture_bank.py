@@ -163,9 +163,9 @@ def build_texture_bank(
     360 / n_angles`` (so a start angle off the grid can be on it), ascending in [0, 360).
 
     ``max_crop`` caps the crop side (rounded down to a multiple of 16). The centre cells do not
-    change while the cap covers them plus the extractor's receptive field (VGG-16 relu3_3: 32 + 40
-    px -> 80; VGG-19 relu3_1: 32 + 24 px -> 64, for 8 cells at stride 4); building then costs a
-    fraction of the full crops' time.
+    change while the cap covers them plus the extractor's receptive field (:func:`exact_crop`: 80 px
+    for VGG-16 relu3_1-3, 64 px for VGG-19 relu2_1 + relu3_1, for 8 cells at stride 4); building then
+    costs a fraction of the full crops' time.
     """
     if n_angles < 1 or cells < 1 or texture_height < 1:
         raise ValueError(f"need n_angles, cells and texture_height >= 1, got {n_angles}, {cells}, {texture_height}")
@@ -274,6 +274,21 @@ def crop_side(height: int, width: int, max_crop: int | None = None) -> int:
     if max_crop is not None:
         side = min(side, max_crop)
     return side - side % CROP_MULTIPLE if side >= CROP_MULTIPLE else side
+
+
+def exact_crop(stride: int, reach: tuple[int, int], cells: int) -> int:
+    """The smallest crop side (a multiple of ``CROP_MULTIPLE``) whose centre ``cells`` x ``cells`` feature
+    cells read only the crop's own pixels, for an extractor whose cell j reads pixels ``stride * j +
+    reach[0]`` to ``stride * j + reach[1]`` (``FeatureSpec.cell_reach``): no kept cell sees the padding, so
+    they equal the cells of the same patch inside any larger image."""
+    if stride < 1 or cells < 1 or reach[0] > 0 or reach[1] < stride - 1:
+        raise ValueError(f"need stride, cells >= 1 and a reach around the cell, got {stride}, {cells}, {reach}")
+    side = CROP_MULTIPLE
+    while True:
+        top = (side // stride - cells) // 2
+        if top >= 0 and stride * top + reach[0] >= 0 and stride * (top + cells - 1) + reach[1] <= side - 1:
+            return side
+        side += CROP_MULTIPLE
 
 
 def tiled_for_crop(image: np.ndarray, side: int) -> np.ndarray:
