@@ -25,7 +25,7 @@ def test_cpu_kernel_is_built_and_loaded():
     """The fast ``cpu`` backend is the one ``auto`` picks on the CPU (unless explicitly allowed away)."""
     if "cpu" not in available_backends("cpu") and os.environ.get(ALLOW_NO_KERNEL) == "1":
         pytest.skip(f"{ALLOW_NO_KERNEL}=1 and the kernel is unavailable: {cpu_backend.unavailable_reason()}")
-    assert available_backends("cpu") == ["cpu", "torch"], (
+    assert available_backends("cpu")[0] == "cpu", (
         f"the compiled cpu rasterizer did not build or load: {cpu_backend.unavailable_reason()} "
         f"(set {ALLOW_NO_KERNEL}=1 to run without it on purpose)"
     )

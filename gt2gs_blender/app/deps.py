@@ -18,10 +18,12 @@ PINS: dict[str, str] = {
     "numpy": "1.26.4",
     "opencv-contrib-python-headless": "4.11.0.86",
     "ninja": "1.13.0",
+    "numba": "0.68.1",
 }
 """The runtime packages of requirements.txt with their pinned versions (a test keeps the two equal)."""
 MODULES: dict[str, str] = {"torch": "torch", "numpy": "numpy", "opencv-contrib-python-headless": "cv2"}
-"""Distribution -> module the engine imports (ninja only speeds up the C++ build; not required)."""
+"""Distribution -> module the engine imports (ninja only speeds up the C++ build, numba runs the fast rasterizer
+where no C++ compiler is: neither is required)."""
 TORCH_INDEX = {
     "CPU": "https://download.pytorch.org/whl/cpu",
     "CUDA": "https://download.pytorch.org/whl/cu128",

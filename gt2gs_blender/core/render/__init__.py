@@ -4,8 +4,9 @@
 for a batch of same-size cameras. Alpha rules, identical in every backend: a Gaussian's footprint
 is where alpha = opacity * exp(-d^T Sigma^-1 d / 2) >= 1/255 (with 0.3 px^2 dilation of Sigma);
 alpha is clamped to 0.99; a pixel stops before the Gaussian that would bring its transmittance
-below 1e-4. Backends: ``cpu`` (C++/OpenMP kernel), ``torch`` (portable, CPU or CUDA), ``gsplat``
-(CUDA kernels when installed). ``fix_geometry()`` records a render's compositing weights, so that
+below 1e-4. Backends: ``cpu`` (C++/OpenMP kernel, compiled at first use), ``numba`` (the same kernel
+ported to numba: as fast, no compiler needed), ``torch`` (portable, CPU or CUDA), ``gsplat`` (CUDA
+kernels when installed). ``fix_geometry()`` records a render's compositing weights, so that
 while the geometry holds still any colours are redrawn as a weighted gather (``fixed_geometry``).
 """
 
@@ -18,7 +19,7 @@ import torch
 from ..cameras.camera import Camera, stack_cameras
 from ..scene.gaussians import GaussianScene
 from . import cpu_backend, gsplat_backend, torch_backend
-from .backends import BACKENDS, available_backends, resolve_backend
+from .backends import BACKENDS, available_backends, kernel, resolve_backend
 from .fixed_geometry import FixedGeometry, fix_geometry
 from .output import RenderOutput
 from .projection import FAR_PLANE, NEAR_PLANE, project
@@ -67,11 +68,14 @@ def rasterization(
     options = {"sh_degree": sh_degree, "near_plane": near_plane, "far_plane": far_plane, "with_depth": render_depth}
     if name == "gsplat":
         image, alpha, footprints = gsplat_backend.rasterize(*inputs, **options)
-    else:
-        backend_module = cpu_backend if name == "cpu" else torch_backend
-        projector = cpu_backend.project if name == "cpu" else project
-        proj = projector(*inputs, **options)
-        image, alpha = backend_module.composite(proj, n_cams, width, height)
+    elif name == "torch":
+        proj = project(*inputs, **options)
+        image, alpha = torch_backend.composite(proj, n_cams, width, height)
+        footprints = proj.footprints()
+    else:  # a compiled kernel: C++ or numba
+        compiled = kernel(name)
+        proj = cpu_backend.project(*inputs, **options, kernel=compiled)
+        image, alpha = cpu_backend.composite(proj, n_cams, width, height, kernel=compiled)
         footprints = proj.footprints()
     rgb, depth = (image[..., :-1], image[..., -1]) if render_depth else (image, None)
     if backgrounds is not None:

@@ -1,10 +1,12 @@
-"""The fast CPU backend: a small C++/OpenMP kernel, compiled once per content (see kernel_cache)."""
+"""The fast CPU backends: a small C++/OpenMP kernel, compiled once per content (see kernel_cache), and the
+autograd glue every kernel with its functions shares (the C++ one, or numba_backend's port of it)."""
 
 from __future__ import annotations
 
 import logging
 import threading
 from types import ModuleType
+from typing import Any
 
 import torch
 
@@ -23,7 +25,7 @@ def load_kernel() -> ModuleType | None:
         if "module" not in _state:
             _state["module"], _state["reason"] = _compile()
             if _state["module"] is None:
-                log.warning("fast CPU rasterizer unavailable, using the portable torch backend: %s", _state["reason"])
+                log.warning("fast CPU rasterizer unavailable (the C++ kernel did not build): %s", _state["reason"])
         return _state["module"]  # type: ignore[return-value]
 
 
@@ -41,28 +43,27 @@ def _compile() -> tuple[ModuleType | None, str | None]:
         return None, f"{type(exc).__name__}: {str(exc).strip().splitlines()[-1] if str(exc).strip() else exc}"
 
 
-def depth_order(depths: torch.Tensor) -> torch.Tensor:
+def depth_order(depths: torch.Tensor, kernel: Any = None) -> torch.Tensor:
     """Entry indices front to back, ties by index: the kernel's radix sort for float32 (linear, the argsort
-    was a tenth of a transfer's time), a stable argsort for float64."""
+    was a tenth of a transfer's time), a stable argsort for float64. ``kernel``: the C++ one when None."""
     if depths.dtype == torch.float32:
-        return load_kernel().depth_order(depths.contiguous())
+        return (kernel or load_kernel()).depth_order(depths.contiguous())
     return torch.argsort(depths, stable=True)
 
 
-def bin_entries(proj: Projection, n_cams: int, width: int, height: int) -> TileBins:
-    """Counting-sort binning in C++ (linear in the number of pairs)."""
+def bin_entries(proj: Projection, n_cams: int, width: int, height: int, kernel: Any = None) -> TileBins:
+    """Counting-sort binning in the kernel (linear in the number of pairs)."""
+    kernel = kernel or load_kernel()
     tiles_x, tiles_y = tile_grid(width, height)
-    order = depth_order(proj.depths.detach())
-    offsets, pairs = load_kernel().bin_tiles(
-        proj.tile_bbox, proj.cam_ids.to(torch.int32), order, n_cams, tiles_x, tiles_y
-    )
+    order = depth_order(proj.depths.detach(), kernel)
+    offsets, pairs = kernel.bin_tiles(proj.tile_bbox, proj.cam_ids.to(torch.int32), order, n_cams, tiles_x, tiles_y)
     return TileBins(offsets=offsets, pair_gauss=pairs)
 
 
 class _Composite(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, means2d, conics, colors, opacities, bins: TileBins, n_cams: int, width: int, height: int):
-        kernel = load_kernel()
+    def forward(ctx, means2d, conics, colors, opacities, bins: TileBins, n_cams: int, width: int, height: int, kernel):
+        ctx.kernel = kernel
         args = (means2d.contiguous(), conics.contiguous(), colors.contiguous(), opacities.contiguous())
         image, final_t, pixel_end = kernel.forward(*args, bins.offsets, bins.pair_gauss, n_cams, width, height)
         ctx.save_for_backward(*args, bins.offsets, bins.pair_gauss, final_t, pixel_end)
@@ -79,7 +80,7 @@ class _Composite(torch.autograd.Function):
         if grad_alpha is None:
             grad_alpha = torch.zeros_like(final_t)
         geometry = ctx.needs_input_grad[0] or ctx.needs_input_grad[1] or ctx.needs_input_grad[3]
-        g_means, g_conics, g_colors, g_op = load_kernel().backward(
+        g_means, g_conics, g_colors, g_op = ctx.kernel.backward(
             means2d,
             conics,
             colors,
@@ -95,21 +96,25 @@ class _Composite(torch.autograd.Function):
             height,
             geometry,
         )
-        return g_means, g_conics, g_colors, g_op, None, None, None, None
+        return g_means, g_conics, g_colors, g_op, None, None, None, None, None
 
 
-def composite(proj: Projection, n_cams: int, width: int, height: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """(image (B,H,W,D), alpha (B,H,W)) of the projected entries."""
-    bins = bin_entries(proj, n_cams, width, height)
-    return _Composite.apply(proj.means2d, proj.conics, proj.colors, proj.opacities, bins, n_cams, width, height)
+def composite(
+    proj: Projection, n_cams: int, width: int, height: int, kernel: Any = None
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(image (B,H,W,D), alpha (B,H,W)) of the projected entries, by ``kernel`` (the C++ one when None)."""
+    kernel = kernel or load_kernel()
+    bins = bin_entries(proj, n_cams, width, height, kernel)
+    args = (proj.means2d, proj.conics, proj.colors, proj.opacities, bins, n_cams, width, height, kernel)
+    return _Composite.apply(*args)
 
 
 class _Project(torch.autograd.Function):
     """C++ projection of the visible entries (compacted in the kernel); gradients flow to the Gaussians."""
 
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, sh, viewmats, ks, width, height, near, far, sh_degree):
-        kernel = load_kernel()
+    def forward(ctx, means, quats, scales, opacities, sh, viewmats, ks, width, height, near, far, sh_degree, kernel):
+        ctx.kernel = kernel
         sh_in = sh if sh_degree >= 0 else means.new_zeros(0)
         means2d, conics, rgb, depth, radii, rects, cam_ids, gauss_ids = kernel.project_forward(
             means.detach(),
@@ -141,7 +146,7 @@ class _Project(torch.autograd.Function):
         g_rgb = means.new_zeros(zeros["rgb"]) if g_rgb is None else g_rgb
         g_depth = means.new_zeros(zeros["d"]) if g_depth is None else g_depth
         geometry = any(ctx.needs_input_grad[:3])  # means, quats, scales: else a colour-only step
-        gm, gq, gs, gsh = load_kernel().project_backward(
+        gm, gq, gs, gsh = ctx.kernel.project_backward(
             means.detach(),
             quats.detach(),
             scales.detach(),
@@ -160,7 +165,7 @@ class _Project(torch.autograd.Function):
             geometry,
         )
         gm, gq, gs = (gm, gq, gs) if geometry else (None, None, None)
-        return gm, gq, gs, None, gsh if sh_degree >= 0 else None, None, None, None, None, None, None, None
+        return gm, gq, gs, None, gsh if sh_degree >= 0 else None, None, None, None, None, None, None, None, None
 
 
 def project(
@@ -178,8 +183,9 @@ def project(
     near_plane,
     far_plane,
     with_depth,
+    kernel: Any = None,
 ) -> Projection:
-    """The C++ twin of projection.project (same entries, same rules)."""
+    """The kernel's twin of projection.project (same entries, same rules); ``kernel``: the C++ one when None."""
     degree = -1 if sh_degree is None else sh_degree
     means2d, conics, rgb, depth, cam_ids, gauss_ids, radii, rects = _Project.apply(
         means,
@@ -194,6 +200,7 @@ def project(
         near_plane,
         far_plane,
         degree,
+        kernel or load_kernel(),
     )
     if sh_degree is None:
         rgb = colors[gauss_ids]

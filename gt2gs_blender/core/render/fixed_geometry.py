@@ -3,7 +3,7 @@
 While the means, shapes and opacities stay put, each pixel of a render is sum_i w_i c_i + T bg, with
 w_i = alpha_i T_i the compositing weight of the i-th Gaussian in front of it (the alpha rules of
 :func:`rasterization`). :func:`fix_geometry` records those weights once per camera (the CPU kernel's
-forward sweep) and :meth:`FixedGeometry.render` then renders any colours, and their gradient, as a
+forward sweep, C++ or numba) and :meth:`FixedGeometry.render` then renders any colours, and their gradient, as a
 weighted gather and scatter: the projection, depth sort, tile binning and both compositing sweeps of
 a render are skipped. The same sums in the same order as the kernel's forward: given its colours the
 image is the rasterizer's to the bit; the SH colours are evaluated here by torch (within float rounding
@@ -20,7 +20,7 @@ import torch
 from ..cameras.camera import Camera, stack_cameras
 from ..scene.gaussians import GaussianScene
 from . import cpu_backend
-from .backends import resolve_backend
+from .backends import KERNEL_BACKENDS, kernel, resolve_backend
 from .output import RenderOutput
 from .projection import FAR_PLANE, NEAR_PLANE, Footprints, entry_colors
 
@@ -40,6 +40,7 @@ class FixedGeometry:
     means: torch.Tensor  # (N, 3) detached: the view directions of SH colours
     viewmats: torch.Tensor  # (B, 4, 4)
     n_gaussians: int
+    backend: str  # the kernel backend that recorded them and redraws from them
 
     @property
     def nbytes(self) -> int:
@@ -53,31 +54,34 @@ class FixedGeometry:
             raise ValueError(f"fixed geometry of {self.n_gaussians} Gaussians used for a scene of {len(scene)}")
         fp = self.footprints
         colors = entry_colors(scene.sh, self.means, self.viewmats, fp.cam_ids, fp.gauss_ids, scene.sh_degree)
-        rgb = _WeightedRows.apply(colors, self.offsets, self.entries, self.weights).reshape(*self.alphas.shape, -1)
+        args = (colors, self.offsets, self.entries, self.weights, kernel(self.backend))
+        rgb = _WeightedRows.apply(*args).reshape(*self.alphas.shape, -1)
         if background is not None:
             rgb = rgb + (1.0 - self.alphas[..., None]) * background.reshape(-1, 1, 1, rgb.shape[-1])
-        return RenderOutput(colors=rgb, depths=None, alphas=self.alphas, backend="cpu", footprints=fp)
+        return RenderOutput(colors=rgb, depths=None, alphas=self.alphas, backend=self.backend, footprints=fp)
 
 
 class _WeightedRows(torch.autograd.Function):
     @staticmethod
-    def forward(ctx, values, offsets, entries, weights):
+    def forward(ctx, values, offsets, entries, weights, compiled):
         ctx.save_for_backward(offsets, entries, weights)
-        ctx.n_values = values.shape[0]
-        return cpu_backend.load_kernel().weighted_rows(offsets, entries, weights, values)
+        ctx.n_values, ctx.kernel = values.shape[0], compiled
+        return compiled.weighted_rows(offsets, entries, weights, values)
 
     @staticmethod
     def backward(ctx, grad):
         offsets, entries, weights = ctx.saved_tensors
-        grad_values = cpu_backend.load_kernel().weighted_rows_backward(offsets, entries, weights, grad, ctx.n_values)
-        return grad_values, None, None, None
+        grad_values = ctx.kernel.weighted_rows_backward(offsets, entries, weights, grad, ctx.n_values)
+        return grad_values, None, None, None, None
 
 
 def fix_geometry(scene: GaussianScene, cameras: Sequence[Camera], *, backend: str = "auto") -> FixedGeometry | None:
-    """Record the compositing weights of ``scene`` in ``cameras``; None where only the CPU kernel can
-    (another backend chosen, a GPU scene, float64, or the kernel unavailable): render normally then."""
-    if scene.dtype != torch.float32 or resolve_backend(backend, scene.device) != "cpu":
+    """Record the compositing weights of ``scene`` in ``cameras``; None where only a CPU kernel (C++ or
+    numba) can (another backend chosen, a GPU scene, float64, or no kernel available): render normally then."""
+    name = resolve_backend(backend, scene.device)
+    if scene.dtype != torch.float32 or name not in KERNEL_BACKENDS:
         return None
+    compiled = kernel(name)
     viewmats, ks, width, height = stack_cameras(cameras, device=scene.device, dtype=scene.dtype)
     with torch.no_grad():
         means, opacities = scene.means.detach(), scene.opacities.detach()
@@ -95,9 +99,10 @@ def fix_geometry(scene: GaussianScene, cameras: Sequence[Camera], *, backend: st
             near_plane=NEAR_PLANE,
             far_plane=FAR_PLANE,
             with_depth=False,
+            kernel=compiled,
         )
-        bins = cpu_backend.bin_entries(proj, len(cameras), width, height)
-        offsets, entries, weights, final_t = cpu_backend.load_kernel().contributions(
+        bins = cpu_backend.bin_entries(proj, len(cameras), width, height, compiled)
+        offsets, entries, weights, final_t = compiled.contributions(
             proj.means2d.contiguous(),
             proj.conics.contiguous(),
             proj.opacities.contiguous(),
@@ -116,4 +121,5 @@ def fix_geometry(scene: GaussianScene, cameras: Sequence[Camera], *, backend: st
         means=means,
         viewmats=viewmats,
         n_gaussians=len(scene),
+        backend=name,
     )

@@ -15,7 +15,7 @@ Projection = Literal["auto", "box", "view"]
 """How Lay Out Texture puts the texture on the scene."""
 FeatureNetwork = Literal["auto", "vgg16_relu3", "vgg19_norm_relu3"]
 Device = Literal["auto", "cpu", "cuda"]
-Rasterizer = Literal["auto", "torch", "cpu", "gsplat"]
+Rasterizer = Literal["auto", "torch", "cpu", "numba", "gsplat"]
 UpAxis = Literal["+z", "-z", "+y", "-y", "+x", "-x", "auto"]
 """The scene's up direction for automatic views (``cameras.generate.axis_vector``'s names, or estimated)."""
 
