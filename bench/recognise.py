@@ -58,7 +58,7 @@ sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
 from common import parse_overrides
-from recognise_scenes import BenchScene, layout_start, layout_surface, load_bench_scene, run_start
+from recognise_scenes import SCENES, BenchScene, layout_start, layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.metrics import masked_ssim
@@ -440,7 +440,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--scenes", nargs="+", default=["donut", "fern"], choices=["donut", "fern"])
+    parser.add_argument("--scenes", nargs="+", default=["donut", "fern"], choices=SCENES)
     parser.add_argument("--textures", nargs="+", default=list(STRUCTURED), metavar="NAME")
     parser.add_argument("--presets", "--preset", nargs="+", default=["fast"], metavar="PRESET")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="TransferConfig override")

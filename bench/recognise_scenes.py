@@ -1,11 +1,12 @@
-"""The two scenes of ``bench/recognise.py``: what the transfer optimises, and the held-out views it never saw.
+"""The scenes of ``bench/recognise.py``: what the transfer optimises, and the held-out views it never saw.
 
 The donut is the shared PLY: the transfer uses its automatic ring (the preset's ``n_views`` at 20 degrees
 elevation, first view at azimuth 0); the held-out views are a ring at 40 degrees elevation whose azimuths
 fall between the transfer's. The fern is the shared LLFF capture fitted with the project's ``fit`` engine,
 once, cached under ``~/.cache/gt2gs_blender/bench/`` by the fit settings; the transfer uses the LLFF
 training poses and the held-out views are the LLFF test poses (every 8th), which neither the fit nor the
-transfer saw.
+transfer saw. The captures (a guitar on its stand, 90,854 splats; a robot on a patch of ground, 500,000 splats,
+CC-BY-4.0) are seen as the donut is, about their own up axis.
 
 ``run_start``/``layout_start``: what a run on a scene starts from, from the engine's own pieces (the pipeline's
 prepare stage): the layout's frame from the run's views, and the scene with the texture laid out before any
@@ -42,6 +43,16 @@ from gt2gs_blender.core.transfer.views import render_views
 SHARED = ROOT.parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 FERN = SHARED / "data" / "scenes" / "fern_llff"
+CAPTURES = {
+    "guitar": SHARED / "data" / "scenes" / "captures" / "guitar.compressed.ply",
+    "playbot": SHARED / "data" / "scenes" / "captures" / "playbot",  # CC-BY-4.0: credit in its CREDITS.txt
+}
+"""Real captures, trained the usual way (up along -y): the transfer uses its automatic ring (``up`` auto finds -y),
+the held-out views are from a ring at 40 degrees as the donut's, the four that see the most of it (``broadest``)."""
+CAPTURE_UP = "-y"
+CAPTURE_SCALE = 2
+"""The captures' held-out views are this many times the bench size: a guitar fills a fifth of a square view."""
+SCENES = ("donut", "fern", *CAPTURES)
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gt2gs_blender" / "bench"
 FERN_FIT = {"iterations": 1500, "downscale": 8, "points": DEFAULT_POINTS, "sh_degree": DEFAULT_SH_DEGREE, "seed": 0}
 """The fern's fit settings (1,500 steps, as bench/ablation.py fits it when missing: ~7 min on 2 cores)."""
@@ -82,18 +93,29 @@ def fern_fit_dir(settings: dict | None = None) -> Path:
 
 
 def load_bench_scene(name: str, resolution: int = 256) -> BenchScene:
-    """``donut`` or ``fern`` with its transfer views and held-out views (longest side ``resolution``)."""
-    if name == "donut":
-        scene = read_scene(DONUT)
-        ring = auto_views(scene, HELD_OUT_RING, width=resolution, height=resolution, elevation_deg=HELD_OUT_ELEVATION)
-        return BenchScene(name, scene, None, [ring[i] for i in HELD_OUT_DONUT], (1.0, 1.0, 1.0))
+    """One of ``SCENES`` with its transfer views and held-out views (longest side ``resolution``)."""
+    if name == "donut" or name in CAPTURES:
+        scene = read_scene(CAPTURES.get(name, DONUT))
+        up, size = (CAPTURE_UP, resolution * CAPTURE_SCALE) if name in CAPTURES else ("+z", resolution)
+        ring = auto_views(scene, HELD_OUT_RING, width=size, height=size, elevation_deg=HELD_OUT_ELEVATION, up=up)
+        held_out = [ring[i] for i in (HELD_OUT_DONUT if name == "donut" else broadest(scene, ring))]
+        return BenchScene(name, scene, None, held_out, (1.0, 1.0, 1.0))
     if name == "fern":
         folder = fern_fit_dir()
         cameras = load_views(folder / "cameras.json")
         train = [c for i, c in enumerate(cameras) if i % LLFF_HOLDOUT]
         test = [c.scaled(resolution / max(c.width, c.height)) for i, c in enumerate(cameras) if not i % LLFF_HOLDOUT]
         return BenchScene(name, read_scene(folder / "point_cloud.ply"), train, test, (0.0, 0.0, 0.0))
-    raise ValueError(f"unknown scene {name!r}; choose donut or fern")
+    raise ValueError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")
+
+
+def broadest(scene: GaussianScene, ring: list[Camera]) -> list[int]:
+    """Of the ring's views between a 16-view transfer ring's (odd indices), the ``len(HELD_OUT_DONUT)`` that see
+    the most of the object, in ring order: a thin capture (a guitar) seen edge-on has no window to measure."""
+    between = range(1, len(ring), 2)
+    with torch.no_grad():
+        seen = {i: float(render_views(scene, [ring[i]], torch.ones(3), "auto").alphas[0].sum()) for i in between}
+    return sorted(sorted(seen, key=seen.__getitem__, reverse=True)[: len(HELD_OUT_DONUT)])
 
 
 def run_start(bench: BenchScene, config: TransferConfig, texture: Path) -> RunPlan:

@@ -391,29 +391,29 @@ def zero_step_config(shared, tmp_path, **overrides) -> TransferConfig:
     )
 
 
-@pytest.mark.parametrize("keep", [True, False])
+@pytest.mark.parametrize("keep", [1.0, 0.5, 0.0])
 def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
-    """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8), Shade
-    Softness 0 (each splat its own shade): the dark half keeps 0.35 + 0.65 x 0.2 / 0.8 of the brightness,
-    the light half all of it (none kept when off); the preview shows exactly the zero-step run, the detail
+    """A white texture on a wall dark on its left half (luminance 0.2) and light on its right (0.8), Scene
+    Softness 0 (each splat its own shade): at Keep Scene 1 the two halves keep the scene's ratio of tones, 0.2 /
+    0.8, at 0.5 its square root, at 0 none (all white); the preview shows exactly the zero-step run, the detail
     split's children included."""
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, keep_shading=keep, shade_softness=0.0)
+    config = zero_step_config(shared, tmp_path, keep_scene=keep, shade_softness=0.0)
     result = transfer(scene, white, [cam], config)
     colours = result.scene.base_colors.mean(1)
     on_left = result.scene.means[:, 0] < -0.1
     on_right = result.scene.means[:, 0] > 0.1
-    dark = 0.35 + 0.65 * 0.2 / 0.8 if keep else 1.0
+    dark = (0.2 / 0.8) ** keep
     assert float(colours[on_left].mean()) == pytest.approx(dark, abs=0.02)
     assert float(colours[on_right].mean()) == pytest.approx(1.0, abs=0.02)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
     assert np.abs(preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
     # the layout term's target is shaded the same way, per pixel from the view's own luminance
     views = render_views(scene, [cam], torch.zeros(3), "auto")
-    (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, shaded=keep)
+    (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, keep > 0, keep=keep)
     covered = ideal[..., 3] > 0
     half = torch.zeros_like(covered)
     half[:, : 96 // 2 - 6] = True  # the wall's left half on screen, away from the seam
@@ -422,7 +422,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
 
 
 def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(shared, tmp_path):
-    """The half-dark wall with Shade Softness 0.1 repeat (0.1 world units here): four widths from the seam
+    """The half-dark wall with Scene Softness 0.1 repeat (0.1 world units here): four widths from the seam
     each half keeps its shade, on the seam the splats and the layout term's image take the shade of the mean
     luminance 0.5; the preview still shows exactly the zero-step run."""
     from gt2gs_blender.core.api import transfer
@@ -433,11 +433,11 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     config = zero_step_config(shared, tmp_path, shade_softness=0.1)
     result = transfer(scene, white, [cam], config)
     colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
-    dark, seam = 0.35 + 0.65 * 0.2 / 0.8, 0.35 + 0.65 * 0.5 / 0.8
+    dark, seam = 0.2 / 0.8, 0.5 / 0.8
     assert float(colours[x < -0.4].mean()) == pytest.approx(dark, abs=0.02)
     assert float(colours[x > 0.4].mean()) == pytest.approx(1.0, abs=0.02)
     assert float(colours[x.abs() < 0.02].mean()) == pytest.approx(seam, abs=0.03)
-    one_width = 0.35 + 0.65 * (0.2 + 0.6 * 0.1587) / 0.8  # a Gaussian's tail beyond one sigma: 15.87 %
+    one_width = (0.2 + 0.6 * 0.1587) / 0.8  # a Gaussian's tail beyond one sigma: 15.87 %
     assert float(colours[(x + 0.1).abs() < 0.02].mean()) == pytest.approx(one_width, abs=0.03)
     expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
     assert np.abs(preview(scene, white, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0

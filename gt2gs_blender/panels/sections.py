@@ -99,8 +99,8 @@ def effective_text(name: str, value: Any, info: dict[str, Any] | None = None) ->
 USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "texture_height": lambda s: s.texture_repeats == 0,
     "layout_projection": lambda s: s.layout,
-    "keep_shading": lambda s: s.layout,
-    "shade_softness": lambda s: s.layout and s.keep_shading,
+    "keep_scene": lambda s: s.layout,
+    "shade_softness": lambda s: s.layout and s.keep_scene > 0,
     "split_size": lambda s: s.layout,
     "split_first": lambda s: s.layout and s.split_size > 0,
     "split_budget": lambda s: s.layout and s.split_size > 0,

@@ -35,7 +35,7 @@ PREVIEWED = (
     "texture_height",
     "layout",
     "layout_projection",
-    "keep_shading",
+    "keep_scene",
     "shade_softness",
     "texture_repeats",
     "split_size",

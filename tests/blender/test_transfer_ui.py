@@ -582,7 +582,7 @@ def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
 
 def test_settings_a_run_ignores_are_greyed_out(fresh):
     """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on,
-    Shade Softness only while Keep Light and Shade is on."""
+    Scene Softness only while Keep Scene is above 0."""
     from gt2gs_blender.panels.sections import USED_WHEN, setting_used
 
     settings = fresh.context.scene.gt2gs
@@ -590,8 +590,8 @@ def test_settings_a_run_ignores_are_greyed_out(fresh):
     settings.texture_repeats, settings.layout = 1.5, True
     assert not setting_used(settings, "texture_height") and setting_used(settings, "split_size")
     assert setting_used(settings, "shade_softness")
-    settings.keep_shading = False
-    assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_shading")
+    settings.keep_scene = 0.0
+    assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_scene")
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
     assert setting_used(settings, "angle")

@@ -194,26 +194,88 @@ def _unit(v: Sequence[float], what: str) -> np.ndarray:
     return arr / norm
 
 
-def estimate_up_axis(
-    points: np.ndarray,
-    prefer: Sequence[float] = (0.0, 0.0, 1.0),
-    flatness: float = 0.5,
-) -> np.ndarray:
-    """The scene's up axis: the smallest-variance principal axis of ``points``.
+FLATNESS = 0.5
+"""Else a scene is flat (a ground patch, a tabletop object, a donut) when its smallest principal variance is below
+this share of the middle one: up is that axis."""
+ELONGATION = 3.0
+"""A scene stands tall (a guitar on its stand, a lamp) when its largest variance is this many times the middle one
+and one end of it is a support (:func:`_support_sign`): up is that axis, before any flatness (a guitar is flat too)."""
+SNAP_DEG = 25.0
+"""An axis found within this angle of a world axis is that axis (captures keep a trainer's or Blender's convention;
+a leaning neck or a sloping ground does not tilt the views)."""
+SUPPORT_SLAB = 0.15
+SUPPORT_RATIO = 1.5
+"""The sign: the end whose outer ``SUPPORT_SLAB`` of the height spreads this many times wider than the other's is the
+bottom (a stand's feet, the ground under a robot); else the convention."""
+CONVENTION = {0: (1.0, 0.0, 0.0), 1: (0.0, -1.0, 0.0), 2: (0.0, 0.0, 1.0)}
+"""Each world axis's up when the splats do not say: +X, a trainer's -Y (its cameras' y points down), Blender's +Z."""
 
-    Reliable for flat-ish scenes (ground planes, tabletop objects, a donut's symmetry axis); when
-    the smallest variance is not below ``flatness`` times the middle one no axis stands out and
-    ``prefer`` is returned. The sign is chosen to agree with ``prefer``.
-    """
+
+def estimate_up_axis(points: np.ndarray, prefer: Sequence[float] | None = None) -> np.ndarray:
+    """The scene's up axis from its splat centres: the longest principal axis of a tall scene that stands on one end,
+    else the thinnest of a flat one, else the world axis nearest ``prefer`` (by default +Z); snapped to a world axis
+    within ``SNAP_DEG``, pointing away from the end the scene stands on (:func:`_support_sign`), else along
+    ``prefer`` or the axis's ``CONVENTION``."""
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    prefer_v = _unit(prefer, "prefer")
-    if len(pts) < 3:
-        return prefer_v
+    default = np.array(CONVENTION[2]) if prefer is None else _unit(prefer, "prefer")
+    if len(pts) < 4:
+        return default
     variances, axes = np.linalg.eigh(np.cov(pts.T))
-    if not variances[0] < flatness * variances[1]:
-        return prefer_v
-    axis = axes[:, 0]
-    return axis if axis @ prefer_v >= 0 else -axis
+    if variances[2] > ELONGATION * variances[1]:
+        tall = _snapped(axes[:, 2])
+        if (sign := _support_sign(pts, pts @ tall, tall)) != 0:
+            return sign * tall
+    axis = _snapped(axes[:, 0] if variances[0] < FLATNESS * variances[1] else default)
+    if (sign := _support_sign(pts, pts @ axis, axis)) != 0:
+        return sign * axis
+    world = int(np.argmax(np.abs(axis)))
+    reference = np.asarray(CONVENTION[world]) if prefer is None and abs(axis[world]) == 1.0 else default
+    return axis if axis @ reference >= 0 else -axis
+
+
+def _snapped(axis: np.ndarray) -> np.ndarray:
+    """``axis`` (unit), or the world axis within ``SNAP_DEG`` of it (either sign: the sign is chosen later)."""
+    world = int(np.argmax(np.abs(axis)))
+    if abs(axis[world]) < math.cos(math.radians(SNAP_DEG)):
+        return axis / np.linalg.norm(axis)
+    snapped = np.zeros(3)
+    snapped[world] = 1.0
+    return snapped
+
+
+def _support_sign(points: np.ndarray, heights: np.ndarray, axis: np.ndarray) -> int:
+    """+1 when the scene stands on the low end of ``axis`` (its outer slab of heights spreads ``SUPPORT_RATIO``
+    times wider across than the high end's), -1 for the high end, 0 when neither stands out."""
+    lo, hi = np.quantile(heights, [0.01, 0.99])
+    if not hi > lo:
+        return 0
+    across = points - np.outer(heights, axis)
+
+    def spread(slab: np.ndarray) -> float:
+        if slab.sum() < 4:
+            return 0.0
+        return float(np.sqrt(max(np.linalg.eigvalsh(np.cov(across[slab].T))[-2:].prod(), 0.0)))
+
+    slab = SUPPORT_SLAB * (hi - lo)
+    low = spread((heights >= lo) & (heights <= lo + slab))
+    high = spread((heights <= hi) & (heights >= hi - slab))
+    if low > SUPPORT_RATIO * high:
+        return 1
+    if high > SUPPORT_RATIO * low:
+        return -1
+    return 0
+
+
+def front_for(up: Sequence[float]) -> np.ndarray:
+    """The ring's first direction for ``up``: Blender's front (-Y) carried by the turn that takes +Z to a world-axis
+    ``up`` (a half turn about X for -Z, a quarter turn about X for +-Y, about Y for +-X), so a capture and its copy
+    turned to another up get the same views; -Y for an up off the world axes."""
+    u = _unit(up, "up")
+    world = int(np.argmax(np.abs(u)))
+    sign = float(np.sign(u[world]))
+    if abs(u[world]) != 1.0 or world == 0:
+        return np.array([0.0, -1.0, 0.0])
+    return np.array([0.0, -sign, 0.0]) if world == 2 else np.array([0.0, 0.0, sign])
 
 
 def axis_vector(name: str) -> tuple[float, float, float]:
@@ -261,12 +323,14 @@ def auto_views(
         up = estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
     elif isinstance(up, str):
         up = axis_vector(up)
+    front = front_for(up)
     fov_x = math.radians(fov_deg)
     fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
     make = arc_views if kind == "arc" else orbit_views
 
     def views(radius: float) -> list[Camera]:
-        return make(center, radius, n, width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up)
+        ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front)
+        return make(center, radius, n, **ring)
 
     corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box

@@ -48,10 +48,11 @@ class TransferConfig(MachineSettings):
         flag="--views",
     )
     up: UpAxis = setting(
-        "+z",
+        "auto",
         "Up Axis",
-        "The scene's up direction, for automatic views: +Z in Blender, often -Y for a capture from a 3DGS "
-        "trainer, whose cameras have -Y up (on the command line: --up=-y); Auto estimates it from the splats",
+        "The scene's up direction, for automatic views. Auto finds it from the splats: the end a tall object "
+        "stands on, the ground under a capture, else +Z (Blender's up; -Y for a trainer's capture lying flat). "
+        "Set it when the views lie on their side (on the command line: --up=-y)",
         "views",
         choices=get_args(UpAxis),
     )
@@ -89,19 +90,22 @@ class TransferConfig(MachineSettings):
         "texture",
         choices=get_args(Projection),
     )
-    keep_shading: bool = setting(
-        True,
-        "Keep Light and Shade",
-        "With Lay Out Texture on, darken the texture where the scene is dark, so its shapes stay readable "
-        "under it; off: the texture's own colours everywhere",
+    keep_scene: float = setting(
+        1.0,
+        "Keep Scene",
+        "How much of the scene shows through the laid-out texture: 1 keeps its light and dark, edges and "
+        "parts (the texture reads as the surface's material under the capture's own shading, fainter in its "
+        "dark parts); 0 lays the texture's own brightness everywhere, so only the outline shows the scene",
         "texture",
+        min=0.0,
+        max=1.0,
     )
     shade_softness: float = setting(
-        0.05,
-        "Shade Softness",
-        "With Keep Light and Shade on, how broad the kept light and shade is, in texture repeats (0: every "
-        "speck of the scene's own detail; larger: only its broad light and dark, so the texture's own "
-        "pattern reads, while the scene's shapes fade)",
+        0.0,
+        "Scene Softness",
+        "How broad the kept scene is, in texture repeats: 0 keeps every edge and speck of the capture; "
+        "larger keeps only its broad light and dark, so the texture's own pattern reads more, while the "
+        "scene's shapes fade",
         "texture",
         min=0.0,
         max=1.0,

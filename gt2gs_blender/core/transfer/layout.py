@@ -27,8 +27,8 @@ every view agrees on.
   the nearest-feature loss turns laid-out planks back into grain within a few hundred steps.
 - Each splat samples the texture prefiltered to its own footprint (no aliasing of thin mortar
   lines into specks), the three planes blended by the normal's components to the 8th power.
-- Light and shade (``keep_shading``): each splat keeps a share of the texture's brightness from the
-  scene's own light and shade (``shade``), averaged over ``shade_softness`` of a repeat.
+- The scene under it (``keep_scene``): each splat keeps a share of the texture's brightness from the
+  scene's own light and dark (``shade``), averaged over ``shade_softness`` of a repeat.
 """
 
 from __future__ import annotations
@@ -273,12 +273,14 @@ def layout_images(
     angle_deg: float,
     shaded: bool = False,
     softness: float = 0.0,
+    keep: float = 1.0,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
-    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance, averaged over the
-    surface points within about ``softness``, a world length, by :func:`spatial_blur`), as the layout lays it."""
+    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance to the power ``keep``,
+    averaged over the surface points within about ``softness``, a world length, by :func:`spatial_blur`), as
+    the layout lays it."""
     images = []
     for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -291,7 +293,7 @@ def layout_images(
             weight = alpha.cpu()[covered].float()
             seen = (premultiplied.cpu()[covered].float() @ torch.tensor(LUMA)) / weight
             seen = spatial_blur(points, seen, weight, softness)  # the same average as the splats' shade
-            colours = colours * shading(seen)[:, None].to(colours)
+            colours = colours * shading(seen, keep=keep)[:, None].to(colours)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))
@@ -405,10 +407,10 @@ def layout_shading(
     scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig
 ) -> torch.Tensor | None:
     """The shade a run with ``config`` lays the texture with (:func:`layout_shade`, ``shade_softness``
-    repeats of ``frame``), or None when it keeps the texture's own colours (``keep_shading`` off)."""
-    if not config.keep_shading:
+    repeats of ``frame``, ``keep_scene``), or None when it keeps the texture's own colours (``keep_scene`` 0)."""
+    if config.keep_scene <= 0:
         return None
-    return layout_shade(scene, rows, shade_width(frame, config))
+    return layout_shade(scene, rows, shade_width(frame, config), config.keep_scene)
 
 
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:

@@ -64,8 +64,10 @@ def orientation_preview(
     depth_ratio: float = 0.0,
     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
     backend: str = "auto",
+    keep: float = 1.0,
 ) -> np.ndarray:
-    """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``.
+    """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``, the texture shaded by the
+    scene's luminance to the power ``keep`` (the run's ``keep_scene``).
 
     ``resolution`` and ``texture_height`` are the transfer's settings: the texture appears as large
     on screen as the transfer's texture bank makes it (its nearest scale spans
@@ -82,7 +84,7 @@ def orientation_preview(
 
     colour = premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]
     luminance = torch.from_numpy(colour @ np.array(LUMA, np.float32))
-    shade = shading(luminance, luminance[torch.from_numpy(covered)]).numpy()
+    shade = shading(luminance, luminance[torch.from_numpy(covered)], keep).numpy()
 
     nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
     laid = np.zeros((cam.height, cam.width, 3), np.float32)
@@ -145,6 +147,7 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
         depth_ratio=config.depth_ratio,
         background=config.background,
         backend=config.backend,
+        keep=config.keep_scene,
     )
     return Preview(image, len(plan.original))
 

@@ -184,7 +184,8 @@ def _transfer(
         laid_out = {"projection": projected, "repeat_world": frame.repeat, "splats": len(work), "split": split}
     targets = view_targets(plan.used, work, extractor, config, config.backend)
     if frame is not None and config.layout and config.lambda_layout > 0:
-        ideal = layout_images(plan.used, image, frame, config.angle, shade is not None, shade_width(frame, config))
+        shaded, width = shade is not None, shade_width(frame, config)
+        ideal = layout_images(plan.used, image, frame, config.angle, shaded, width, config.keep_scene)
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 

@@ -1,9 +1,11 @@
-"""The scene's light and shade kept under the laid-out texture (``keep_shading``).
+"""The scene kept under the laid-out texture (``keep_scene``): its light and dark, edges and parts.
 
 Laid over a whole capture, the plain texture hid the scene (the fern's SSIM to the original fell from 0.49
 to 0.05). Each splat keeps ``layout_shade`` of the texture's brightness: its own original luminance over the
-bright end of the scene's (floored at ``SHADE_FLOOR``), as the sketch preview shades its texture. The shade
-follows each splat through densification (an optimiser attachment) to the detail split's children.
+bright end of the scene's, to the power ``keep_scene`` (0: the texture's own brightness everywhere; 1: the
+texture times the scene's luminance, an albedo under the capture's own shading), as the sketch preview shades
+its texture. The shade follows each splat through densification (an optimiser attachment) to the detail
+split's children.
 ``shade_softness`` first averages the luminance over neighbours within that share of a repeat
 (``spatial_blur``; the layout term's images average their surface points the same way), so only the
 scene's broad light and dark darkens the texture, not its specks.
@@ -19,8 +21,8 @@ import torch.nn.functional as F
 from ..scene.gaussians import GaussianScene
 from .metrics import LUMA
 
-SHADE_FLOOR = 0.35
-"""The darkest shade keeps this share of the texture's brightness, so dark parts of the scene stay textured."""
+SHADE_MIN = 0.02
+"""Luminance ratios below this count as this (a black splat is a very dark one, not a zero to a power)."""
 SHADE_QUANTILE = 0.95
 """The bright end of the scene's luminance (full texture brightness): this quantile, so a few specks do not set it."""
 SPATIAL_GRID = 128
@@ -37,10 +39,12 @@ SPATIAL_BOUNDS_SAMPLE = 1_000_000
 """The bounds' quantiles come from at most about this many of the points (torch.quantile's size limit)."""
 
 
-def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0) -> torch.Tensor:
+def layout_shade(
+    scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0, keep: float = 1.0
+) -> torch.Tensor:
     """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its
     luminance, averaged over its neighbours within about ``softness`` (a world length, 0: its own), over the
-    bright end of those splats' (:func:`shading`); 1 for the other splats."""
+    bright end of those splats', to the power ``keep`` (:func:`shading`); 1 for the other splats."""
     luminance = scene.base_colors.detach() @ torch.tensor(LUMA, dtype=scene.dtype, device=scene.device)
     shade = torch.ones_like(luminance)
     part = slice(None) if rows is None else rows
@@ -49,7 +53,7 @@ def layout_shade(scene: GaussianScene, rows: torch.Tensor | None = None, softnes
     seen = luminance[part]
     if softness > 0:
         seen = spatial_blur(scene.means.detach()[part], seen, scene.opacities.detach()[part], softness)
-    shade[part] = shading(seen)
+    shade[part] = shading(seen, keep=keep)
     return shade
 
 
@@ -105,12 +109,12 @@ def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:
     return grid
 
 
-def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None) -> torch.Tensor:
-    """``SHADE_FLOOR`` + the rest times ``luminance`` over the ``SHADE_QUANTILE`` of ``reference`` (default:
-    ``luminance`` itself), clipped to [0, 1]: the light and shade the layout and the sketch preview keep."""
+def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None, keep: float = 1.0) -> torch.Tensor:
+    """``luminance`` over the ``SHADE_QUANTILE`` of ``reference`` (default: ``luminance`` itself), clipped to
+    [``SHADE_MIN``, 1], to the power ``keep``: the light and shade the layout and the sketch preview keep."""
     values = (luminance if reference is None else reference).detach().float().reshape(-1)
     if not len(values):
         return torch.ones_like(luminance)
     rank = max(1, round(SHADE_QUANTILE * len(values)))
     bright = max(float(values.kthvalue(rank).values), 1e-6)
-    return SHADE_FLOOR + (1.0 - SHADE_FLOOR) * (luminance / bright).clamp(0.0, 1.0)
+    return (luminance / bright).clamp(SHADE_MIN, 1.0) ** keep

@@ -1,0 +1,95 @@
+"""The automatic views' up axis, found from the splats (``estimate_up_axis``) on real captures and turned copies."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from gt2gs_blender.core.api import read_scene, render
+from gt2gs_blender.core.cameras.generate import auto_views, estimate_up_axis, front_for
+from gt2gs_blender.core.scene.gaussians import GaussianScene
+
+QUARTER_TURN_X = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""A quarter turn about +X: takes +Y to +Z, so a trainer's -Y-up capture to a -Z-up copy and its inverse to +Z-up."""
+
+
+def turned(scene: GaussianScene, rotation: np.ndarray) -> GaussianScene:
+    """``scene`` turned by ``rotation`` about the origin (centres and orientations; SH degree 0, view-independent)."""
+    r = torch.tensor(rotation, dtype=scene.dtype)
+    w = np.sqrt(max(1.0 + np.trace(rotation), 0.0)) / 2.0
+    x, y, z = (rotation[2, 1] - rotation[1, 2], rotation[0, 2] - rotation[2, 0], rotation[1, 0] - rotation[0, 1])
+    q = torch.tensor([w, x / (4 * w), y / (4 * w), z / (4 * w)], dtype=scene.dtype)
+    a, b = q, scene.quats.detach()
+    product = torch.stack(
+        [
+            a[0] * b[:, 0] - a[1] * b[:, 1] - a[2] * b[:, 2] - a[3] * b[:, 3],
+            a[0] * b[:, 1] + a[1] * b[:, 0] + a[2] * b[:, 3] - a[3] * b[:, 2],
+            a[0] * b[:, 2] - a[1] * b[:, 3] + a[2] * b[:, 0] + a[3] * b[:, 1],
+            a[0] * b[:, 3] + a[1] * b[:, 2] - a[2] * b[:, 1] + a[3] * b[:, 0],
+        ],
+        dim=1,
+    )
+    return replace(scene.with_sh_degree(0).detach(), means=scene.means.detach() @ r.T, quats=product)
+
+
+@pytest.fixture(scope="module")
+def guitar() -> GaussianScene:
+    path = Path(__file__).resolve().parents[2] / "shared" / "data" / "scenes" / "captures" / "guitar.compressed.ply"
+    if not path.is_file():
+        pytest.skip(f"capture not found at {path}")
+    return read_scene(path).with_sh_degree(0).detach()
+
+
+def centres(scene: GaussianScene) -> np.ndarray:
+    """The splat centres inside the scene's robust bounds (what ``auto_views`` estimates from)."""
+    lo, hi = (b.detach().double().numpy() for b in scene.bounds(0.98))
+    means = scene.means.detach().double().numpy()
+    return means[np.all((means >= lo) & (means <= hi), axis=1)]
+
+
+def test_a_trainer_s_guitar_stands_on_its_stand_whichever_way_the_file_turns_it(guitar: GaussianScene) -> None:
+    """The guitar (a trainer's capture: up is -Y, its stand's feet at +Y) is found standing, and so are copies turned
+    to +Z and -Z up: a tall, flat object, whose thinnest axis (the body's thickness) is not its up."""
+    np.testing.assert_array_equal(estimate_up_axis(centres(guitar)), [0.0, -1.0, 0.0])
+    for rotation, up in ((QUARTER_TURN_X, [0.0, 0.0, -1.0]), (QUARTER_TURN_X.T, [0.0, 0.0, 1.0])):
+        np.testing.assert_array_equal(estimate_up_axis(centres(turned(guitar, rotation))), up)
+
+
+def test_a_y_up_and_a_z_up_copy_of_a_capture_get_the_same_views(guitar: GaussianScene) -> None:
+    """Automatic views with ``up="auto"`` on the guitar and on its copy turned to +Z up see the same images: the up
+    axis and the ring's first direction turn with the capture."""
+    z_up = turned(guitar, QUARTER_TURN_X.T)
+    images = []
+    for scene in (guitar, z_up):
+        cameras = auto_views(scene, 4, width=64, height=64, up="auto")
+        images.append(render(scene, cameras, background=(1.0, 1.0, 1.0), render_depth=False).colors)
+    assert float((images[0] - images[1]).abs().max()) < 2e-3
+    upright = images[0][0]
+    rows = (upright < 0.9).any(dim=(1, 2)).nonzero()[:, 0]
+    cols = (upright < 0.9).any(dim=(0, 2)).nonzero()[:, 0]
+    assert int(rows.max() - rows.min()) > 2 * int(cols.max() - cols.min())  # the tall guitar stands in the image
+
+
+def test_the_ring_s_front_turns_with_the_up_axis() -> None:
+    """``front_for``: Blender's front (-Y) for +Z, carried by the quarter turn that takes +Z to each other axis."""
+    for up in ([0, 0, 1], [0, 0, -1], [0, 1, 0], [0, -1, 0], [1, 0, 0], [-1, 0, 0]):
+        front = front_for(up)
+        assert abs(front @ up) < 1e-12 and np.linalg.norm(front) == pytest.approx(1.0)
+    np.testing.assert_array_equal(front_for([0, 0, 1]), [0, -1, 0])
+    np.testing.assert_array_equal(front_for(QUARTER_TURN_X @ [0, 0, 1.0]), QUARTER_TURN_X @ [0, -1.0, 0])
+    np.testing.assert_array_equal(front_for(QUARTER_TURN_X.T @ [0, 0, 1.0]), QUARTER_TURN_X.T @ [0, -1.0, 0])
+
+
+def test_a_ground_patch_under_an_object_says_which_way_is_up() -> None:
+    """A flat patch of ground with a small object standing on it, along -Y as a trainer writes it: up is -Y from
+    the support, whatever the convention would say, and +Y when the same scene is mirrored."""
+    rng = np.random.default_rng(3)
+    ground = rng.uniform(-1.0, 1.0, size=(4000, 3)) * [1.0, 0.01, 1.0] + [0.0, 0.3, 0.0]
+    robot = rng.normal(size=(1000, 3)) * [0.1, 0.15, 0.1] + [0.0, 0.1, 0.0]
+    points = np.concatenate([ground, robot])
+    np.testing.assert_array_equal(estimate_up_axis(points), [0.0, -1.0, 0.0])
+    np.testing.assert_array_equal(estimate_up_axis(points * [1.0, -1.0, 1.0]), [0.0, 1.0, 0.0])
