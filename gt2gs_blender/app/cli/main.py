@@ -1,5 +1,5 @@
-"""The command line, ``python -m gt2gs_blender``: inspect, render, convert and re-texture splat files, run the
-demo, fit one.
+"""The command line, ``python -m gt2gs_blender``: inspect, render, convert and re-texture splat files (one, or a
+batch of many), run the demo, fit one.
 
 Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line on stderr
 and exit with 2; any other exception is a bug, also reported in one line, with exit code 1; ``--debug`` adds
@@ -18,6 +18,7 @@ from collections.abc import Iterator, Sequence
 
 from ...core.errors import GT2GSError, out_of_memory_message
 from . import transfer as transfer_cmd
+from .batch import add_batch_command
 from .convert import add_convert_command
 from .demo import add_demo_command
 from .fit import add_fit_command
@@ -73,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_fit_command(commands, debug)
     transfer_cmd.add_transfer_command(commands, debug)
     add_convert_command(commands, debug)
+    add_batch_command(commands, debug)
     return parser
 
 
