@@ -9,7 +9,8 @@ import json
 import logging
 import os
 import signal
-import threading
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -27,6 +28,7 @@ from gt2gs_blender.core.scene.ply_write import write_ply
 
 from .conftest import SHARED
 
+REPO = Path(__file__).resolve().parents[1]
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 BRICK = SHARED / "data" / "textures" / "brick_wall.jpg"
 SMALL = "preset = 'preview'\n[settings]\nn_views = 4\n"
@@ -142,24 +144,23 @@ def test_a_bad_texture_fails_alone_with_its_one_line_error(cluster, inputs, tmp_
 
 
 def test_resume_after_ctrl_c_runs_only_the_jobs_that_did_not_finish(cluster, inputs, tmp_path):
+    """Ctrl-C (SIGINT to the batch command) once a job is done: the others stop and leave nothing; --resume then
+    runs only those."""
     manifest = tmp_path / "jobs.toml"
     manifest.write_text(
         SMALL + f"[[product]]\nscene = '{inputs['torus']}'\ntexture = '{inputs['stripes']}'\nangle = [0, 30, 60]\n"
     )
-    out, starts = tmp_path / "out", []
-
-    def interrupt_at_the_third_start(event: tuple) -> None:
-        starts.append(event[1]["job"])
-        if len(starts) == 3:  # one job has finished, the last one has just begun
-            signal.raise_signal(signal.SIGINT)
-
-    assert threading.current_thread() is threading.main_thread()
-    cluster.subscribe_topic(TOPIC, interrupt_at_the_third_start)
-    try:
-        with pytest.raises(KeyboardInterrupt):
-            batch(cluster, manifest, out)
-    finally:
-        cluster.unsubscribe_topic(TOPIC)
+    out = tmp_path / "out"
+    command = [sys.executable, "-m", "gt2gs_blender", "batch", str(manifest), "--out", str(out), "--threads", "1"]
+    command += ["--scheduler", cluster.scheduler.address]
+    with subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as batch_cmd:
+        for line in batch_cmd.stdout:
+            if line.startswith("done "):
+                batch_cmd.send_signal(signal.SIGINT)
+                break
+        shown, err = batch_cmd.communicate(timeout=120)
+    assert batch_cmd.returncode == 130 and "interrupted: cancelling the batch" in shown, err
+    assert err.strip().splitlines()[-1] == "gt2gs: error: interrupted"
     first = {
         line.split(" | ")[0][2:]: line.split(" | ")[1]
         for line in (out / "summary.md").read_text().splitlines()

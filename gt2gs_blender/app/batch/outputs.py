@@ -78,10 +78,10 @@ def _digest(path: str) -> str:
 
 
 def finished(out: Path, job: Job, key: str) -> dict[str, Any] | None:
-    """The report of ``job`` when its folder holds a result, a strip and a report made with settings hash ``key``,
-    else None."""
+    """The report of ``job`` when its folder holds its result and a report made with settings hash ``key``, else
+    None (the strip, which Blender's batch script does not make, is not asked for)."""
     files = folder(out, job)
-    if not (files.result.is_file() and files.strip.is_file()):
+    if not files.result.is_file():
         return None
     report = read_report(files.report)
     return report if report is not None and report.get("batch", {}).get("settings_hash") == key else None
