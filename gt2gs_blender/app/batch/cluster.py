@@ -255,7 +255,7 @@ def _run(
             _show_starts(events, batch, attempts, board)
             for future in pending.next_batch(block=False) if pending.has_ready() else ():
                 job = futures[future]
-                rows[job.name] = _row(future, job, out, attempts.get(job.name, 1), retries)
+                rows[job.name] = _row(future, job, out, attempts.get(job.name, 1))
                 board.end(rows[job.name])
             time.sleep(POLL_S)
     except KeyboardInterrupt:
@@ -264,7 +264,7 @@ def _run(
         _cancel(client, batch, [f for f in futures if f not in finished_now])
         for future in finished_now:  # ended before the interrupt, not yet shown
             job = futures[future]
-            rows[job.name] = _row(future, job, out, attempts.get(job.name, 1), retries)
+            rows[job.name] = _row(future, job, out, attempts.get(job.name, 1))
             board.end(rows[job.name])
         return True
     finally:
@@ -282,7 +282,7 @@ def _show_starts(events: queue.SimpleQueue, batch: str, attempts: dict[str, int]
             board.start(name, message["worker"], attempts[name])
 
 
-def _row(future: Any, job: Job, out: Path, attempts: int, retries: int) -> Row:
+def _row(future: Any, job: Job, out: Path, attempts: int) -> Row:
     """A finished future's row: the job's outcome, or why it failed after its retries."""
     if future.status == "finished":
         outcome: Outcome = future.result()
@@ -292,9 +292,7 @@ def _row(future: Any, job: Job, out: Path, attempts: int, retries: int) -> Row:
         return Row(job, "cancelled", attempts)
     exc = future.exception()
     if isinstance(exc, KilledWorker):
-        message = (
-            f"its worker died on each of {retries + 1} tries (out of memory? fewer --workers give each more memory)"
-        )
+        message = "its worker died on every try while running it (out of memory? fewer --workers give each more)"
     else:
         memory = out_of_memory_message(exc)
         message = memory or (one_line(exc) if isinstance(exc, OSError) else f"{type(exc).__name__}: {one_line(exc)}")
