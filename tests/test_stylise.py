@@ -19,6 +19,7 @@ from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.losses import anisotropy
 from gt2gs_blender.core.transfer.pipeline import transfer
+from gt2gs_blender.core.transfer.presets import preset
 from gt2gs_blender.core.transfer.stylise import GEOMETRY, Styliser
 from gt2gs_blender.core.transfer.texture_bank import build_texture_bank
 from gt2gs_blender.core.transfer.views import render_views, view_targets
@@ -65,6 +66,52 @@ def test_schedule_alternates_and_densifies_in_the_first_half():
     assert styliser.phases() == [("stylise", 5, True), ("stylise", 5, False)]
     styliser.config = replace(config, gpb=False, densify=False)
     assert styliser.phases() == [("stylise", 10, False)]
+
+
+@pytest.mark.parametrize("name, rounds, half_round", [("paper-llff", 10, (80, 200)), ("paper-360", 6, (400, 1000))])
+def test_paper_presets_run_the_authors_rounds(name, rounds, half_round):
+    """configs/llff_texture.yaml and tnt_texture.yaml: each round is GT² s -> correct c -> NNFM s -> correct c,
+    and style_trainer.py densifies in the first rounds // 2 rounds, at the end of every stylise phase."""
+    styliser = Styliser.__new__(Styliser)
+    styliser.config = preset(name)
+    s, c = half_round
+    densifying = [True] * (rounds // 2) + [False] * (rounds - rounds // 2)
+    expected = [
+        phase
+        for d in densifying
+        for phase in (("stylise", s, d), ("correct", c, False), ("nnfm", s, d), ("correct", c, False))
+    ]
+    assert styliser.phases() == expected
+    assert styliser.config.densify_every == s
+
+
+def test_nnfm_steps_match_without_the_prior_weigh_cells_alike_and_keep_the_carried_angles():
+    original = blob_scene(300, seed=4).with_sh_degree(0)
+    cameras = auto_views(original, 3, width=48, height=48)
+    config = TransferConfig(stylise_steps=2, correct_steps=0, rounds=1, densify=False, n_scales=1, nnfm_half=True)
+    styliser = gpb_only(original, original, cameras, config, torch.ones(3))
+    view = styliser.views[0]
+    feats = styliser.extractor(view.content_image.permute(2, 0, 1)[None])
+    _, plain = styliser._texture_terms(feats[0], 0, view, nnfm=True)
+    assert styliser.angle_maps == {} and torch.equal(plain, torch.ones_like(plain))
+    _, weighted = styliser._texture_terms(feats[0], 0, view)
+    assert set(styliser.angle_maps) == {0} and not torch.equal(weighted, torch.ones_like(weighted))
+
+
+@pytest.mark.parametrize("prune_large", [False, True])
+def test_prune_large_removes_splats_wider_than_a_fifth_of_the_extent_when_densifying(prune_large):
+    original = blob_scene(300, seed=4).with_sh_degree(0)
+    huge = original.log_scales.clone()
+    huge[:5] = math.log(10.0)  # far over 0.2 of any extent these views give
+    start = replace(original, log_scales=huge)
+    cameras = auto_views(original, 3, width=48, height=48)
+    config = TransferConfig(
+        stylise_steps=1, correct_steps=0, rounds=1, densify_every=1, n_scales=1, prune_large=prune_large
+    )
+    styliser = gpb_only(original, start, cameras, config, torch.ones(3))
+    styliser.stylise_step(densify=True)
+    assert styliser.report.densified[0]["pruned"] >= (5 if prune_large else 0)
+    assert (styliser.scene.log_scales.max() > math.log(5.0)) != prune_large
 
 
 def test_geometry_preservation_branch_pulls_perturbed_geometry_back():

@@ -65,10 +65,10 @@ def _argument_kind(meta: Setting, kind: type) -> dict[str, Any]:
 
 
 def help_text(name: str, meta: Setting) -> str:
-    """The option's help: what it does, its unit, the default preset's value and the paper's."""
+    """The option's help: what it does, its unit, the default preset's value and the paper-llff preset's."""
     unit = f" ({meta.unit})" if meta.unit and meta.unit != "steps" else ""
     default, paper = getattr(PRESETS[DEFAULT_PRESET], name), paper_value(name)
-    values = f"{DEFAULT_PRESET}: {_shown(default)}" + ("" if paper == default else f", paper: {_shown(paper)}")
+    values = f"{DEFAULT_PRESET}: {_shown(default)}" + ("" if paper == default else f", paper-llff: {_shown(paper)}")
     return f"{meta.help}{unit} [{values}]".replace("%", "%%")
 
 

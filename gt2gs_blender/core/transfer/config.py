@@ -27,6 +27,10 @@ from .setting import (
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows (the authors' fixed one): deeper scenes keep it, not a smudge."""
 FORWARD_SPREAD_DEG = 45.0
+PRUNE_SCREEN_RADIUS = 20.0
+PRUNE_WORLD_SCALE = 0.2
+"""Prune Large Splats' limits: a screen radius in pixels and a share of the views' extent (the authors'
+``densify_and_prune(..., 20)`` and ``0.2 * extent``)."""
 """Views all within this angle of their mean direction are a capture seen from the front (the Auto choices)."""
 
 
@@ -291,6 +295,13 @@ class TransferConfig(MachineSettings):
         min=1.0,
         soft_max=4.0,
     )
+    prune_large: bool = setting(
+        False,
+        "Prune Large Splats",
+        f"At each densification also remove splats wider than {PRUNE_SCREEN_RADIUS:g} px on screen or "
+        f"{PRUNE_WORLD_SCALE:g} of the views' extent, as the authors' code does (off: only near-transparent ones)",
+        "stylise",
+    )
     seed: int = setting(0, "Seed", "Random seed of the run", "stylise", min=0)
     # -- GT²
     gt2: bool = setting(
@@ -312,6 +323,13 @@ class TransferConfig(MachineSettings):
         "gt2",
         min=0.0,
         soft_max=100.0,
+    )
+    nnfm_half: bool = setting(
+        False,
+        "NNFM Half-Rounds",
+        "Split every round into a GT² phase and a plain nearest-match phase (no orientation prior, no "
+        "adaptive weights), each followed by its share of the preservation steps, as the authors' code does",
+        "gt2",
     )
     # -- AFCM
     afcm: bool = setting(True, "Adaptive Control", "Weight the texture loss by depth, detail and distortion", "afcm")

@@ -99,8 +99,8 @@ def stylise(
         plateau = Plateau(config.plateau_window, config.plateau_tol)
         for done in range(steps):
             tracker.check_cancel()
-            if phase == "stylise":
-                loss, image = styliser.stylise_step(densify)
+            if phase != "correct":
+                loss, image = styliser.stylise_step(densify, nnfm=phase == "nnfm")
                 preview = _preview(image) if styliser.report.stylise_steps % config.preview_every == 1 else None
                 message = f"stylise: texture loss {loss:.3f}, {len(styliser.scene):,} Gaussians"
             else:

@@ -37,7 +37,7 @@ from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, dens
 from ..train.optim import GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
-from .config import FORWARD_SPREAD_DEG, TransferConfig
+from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
 from .losses import anisotropy, content_loss, cosine_distance, layout_loss, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
@@ -147,7 +147,12 @@ class Styliser:
                 **(carried or {}),
             },
         )
-        self.densify_config = DensifyConfig(grad_threshold=config.densify_grad_threshold, grad_source="color")
+        self.densify_config = DensifyConfig(
+            grad_threshold=config.densify_grad_threshold,
+            grad_source="color",
+            max_screen_radius=PRUNE_SCREEN_RADIUS,
+            max_world_scale=PRUNE_WORLD_SCALE,
+        )
         self.stats = DensityStats(len(scene), "color", device=scene.device)
         self.max_gaussians = int(len(scene) * config.densify_max_growth)
         self.angle_maps: dict[int, torch.Tensor] = {}
@@ -176,17 +181,20 @@ class Styliser:
 
     # -- schedule ---------------------------------------------------------------------------------
     def phases(self) -> list[tuple[str, int, bool]]:
-        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct). Without the GPB the
-        stylise phases join, densifying over the same first half of the steps as with it, so that
-        removing the GPB removes only the correction phases."""
+        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct), or with ``nnfm_half``
+        ``rounds`` x (stylise, correct, nnfm, correct), each half with half the round's steps. Without the
+        GPB the stylise phases join, densifying over the same first half of the rounds as with it, so
+        that removing the GPB removes only the correction phases."""
         cfg = self.config
         rounds = max(1, cfg.rounds)
+        parts = 2 * rounds if cfg.nnfm_half else rounds
         out: list[tuple[str, int, bool]] = []
-        for r in range(rounds):
-            stylise = cfg.stylise_steps * (r + 1) // rounds - cfg.stylise_steps * r // rounds
-            out.append(("stylise", stylise, cfg.densify and r < math.ceil(rounds / 2)))
+        for p in range(parts):
+            stylise = cfg.stylise_steps * (p + 1) // parts - cfg.stylise_steps * p // parts
+            kind = "nnfm" if cfg.nnfm_half and p % 2 else "stylise"
+            out.append((kind, stylise, cfg.densify and p * rounds // parts < math.ceil(rounds / 2)))
             if cfg.gpb:
-                out.append(("correct", cfg.correct_steps * (r + 1) // rounds - cfg.correct_steps * r // rounds, False))
+                out.append(("correct", cfg.correct_steps * (p + 1) // parts - cfg.correct_steps * p // parts, False))
         joined: list[tuple[str, int, bool]] = []
         for phase in (p for p in out if p[1] > 0):
             if joined and joined[-1][0] == phase[0] and joined[-1][2] == phase[2]:
@@ -196,8 +204,9 @@ class Styliser:
         return joined
 
     # -- stylise ----------------------------------------------------------------------------------
-    def stylise_step(self, densify: bool) -> tuple[float, torch.Tensor]:
-        """One GT² step on the next view in order; (texture loss, the rendered image over the background)."""
+    def stylise_step(self, densify: bool, nnfm: bool = False) -> tuple[float, torch.Tensor]:
+        """One GT² step on the next view in order (``nnfm``: a plain nearest-match step of an NNFM
+        half-round); (texture loss, the rendered image over the background)."""
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
@@ -205,7 +214,7 @@ class Styliser:
         out = self._stylise_render(v, view)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
-        distances, weights = self._texture_terms(feats[0], v, view)
+        distances, weights = self._texture_terms(feats[0], v, view, nnfm)
         counted = view.mask
         style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
         loss = (
@@ -226,7 +235,12 @@ class Styliser:
         due = densify_due(self.report.stylise_steps, cfg.densify_every)
         if densify and due and len(self.scene) < self.max_gaussians:
             done = densify_and_prune(
-                self.opt, self.stats, self.densify_config, self.extent, prune_large=False, generator=self.generator
+                self.opt,
+                self.stats,
+                self.densify_config,
+                self.extent,
+                prune_large=cfg.prune_large,
+                generator=self.generator,
             )
             if done.cloned or done.split or done.pruned:
                 self.kept.clear()
@@ -259,24 +273,30 @@ class Styliser:
             return render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
         return fixed.render(self.scene, background=view.backdrop)
 
-    def _texture_terms(self, feats: torch.Tensor, v: int, view: ViewTargets) -> tuple[torch.Tensor, torch.Tensor]:
-        """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w)."""
+    def _texture_terms(
+        self, feats: torch.Tensor, v: int, view: ViewTargets, nnfm: bool = False
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per-cell cosine distance to the targets (with gradients) and the AFCM weight (h,w). An NNFM
+        half-round step (``nnfm``) matches without the prior, weighs every cell alike and leaves the
+        angles the GT² steps carry from view to view as they were."""
         cfg = self.config
-        prior = self._prior(v, view) if cfg.gt2 else self._unknown_angles(view)
+        guided = cfg.gt2 and not nnfm
+        prior = self._prior(v, view) if guided else self._unknown_angles(view)
         # NNFM's bank is one unlabelled feature map: every cell matches all of it, whatever its depth group
         match = match_with_prior(
             feats.detach(),
             self.bank,
             prior,
-            cfg.lambda_prior if cfg.gt2 else 0.0,
+            cfg.lambda_prior if guided else 0.0,
             view.groups if cfg.gt2 else None,
             view.mask,
         )
-        self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
+        if guided:
+            self.angle_maps[v] = torch.where(view.mask, match.angles, torch.full_like(match.angles, math.nan))
         c = feats.shape[0]
         targets = self.bank.features[match.indices.reshape(-1)].to(feats)
         distances = cosine_distance(feats.reshape(c, -1).T, targets).reshape(view.mask.shape)
-        if not cfg.afcm:
+        if not cfg.afcm or nnfm:
             return distances, torch.ones_like(distances)
         phi = distortion(match) if cfg.gt2 else torch.zeros_like(distances)
         level = depth_level(view.groups, cfg.n_scales, distances)
