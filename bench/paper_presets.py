@@ -2,7 +2,7 @@
 schedule, on the donut and the fern (bench/recognise_scenes.py's scenes and transfer views).
 
 ``python bench/paper_presets.py [--scenes donut fern] [--texture herringbone_wood] [--scale 0.1]
-[--resolution 256] [--variants before after]``
+[--resolution 256] [--variants before after] [--fern-iterations N]``
 
 Both variants run on today's engine, one after the other in this process. ``after`` is ``paper-llff`` as it is;
 ``before`` is it with the values the preset held before issue 41 (20 rounds of GT² + correct, colour rate 0.02,
@@ -29,6 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
+import recognise_scenes
 from recognise_scenes import SHARED, load_bench_scene
 
 from gt2gs_blender.core.transfer.pipeline import transfer
@@ -96,7 +97,10 @@ def main() -> None:
     parser.add_argument("--scale", type=float, default=0.1)
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--variants", nargs="+", default=["before", "after"], choices=["before", "after"])
+    parser.add_argument("--fern-iterations", type=int, help="a shorter fern fit than recognise_scenes' (cached apart)")
     args = parser.parse_args()
+    if args.fern_iterations:
+        recognise_scenes.FERN_FIT = {**recognise_scenes.FERN_FIT, "iterations": args.fern_iterations}
     texture = next((SHARED / "data" / "textures").glob(f"{args.texture}.*"))
     rows = []
     with tempfile.TemporaryDirectory() as cache:
