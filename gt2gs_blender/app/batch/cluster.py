@@ -84,7 +84,6 @@ def run_batch(
     if out.exists() and not out.is_dir():
         raise GT2GSError(f"{out}: the batch's output folder is a file; name a folder")
     _check(out, jobs)
-    out.mkdir(parents=True, exist_ok=True)
     keys = settings_hashes(jobs)
     rows: dict[str, Row] = {}
     for job, key in zip(jobs, keys):
@@ -101,6 +100,7 @@ def run_batch(
             if todo:  # else every job was kept: no cluster to start
                 client, plan = stack.enter_context(_connect(scheduler, workers, threads, retries, [j for j, _ in todo]))
                 board.slots = plan.slots
+                out.mkdir(parents=True, exist_ok=True)  # once the cluster is up: a refused start leaves nothing
                 board.say(plan.describe(client))
                 interrupted = _run(client, plan, out, todo, retries, board, rows)
     finally:
