@@ -23,7 +23,14 @@ class Board:
         self.seconds: list[float] = []
         self.started = time.monotonic()
         self.bar = (
-            tqdm(total=total, desc="batch", file=self.stream, leave=True, dynamic_ncols=True)
+            tqdm(
+                total=total,
+                desc="batch",
+                file=self.stream,
+                leave=True,
+                dynamic_ncols=True,
+                bar_format="{desc} {bar}{postfix}",  # our count and ETA (jobs take minutes, not iterations/s)
+            )
             if self.stream.isatty()
             else None
         )
