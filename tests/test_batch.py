@@ -1,7 +1,8 @@
 """The batch on a real Dask cluster: a scheduler and two worker processes on 127.0.0.1 (started once for the
-module). Its results equal the single-job command's; a job whose worker is killed runs again; a bad texture fails
-alone, with its one-line error in the summary; Ctrl-C leaves no half files, and ``--resume`` runs only the jobs
-that did not finish. Jobs are the ``preview`` preset at 4 views, on the donut and a small torus."""
+module; the bad-texture test runs on the command's own local cluster). Its results equal the single-job
+command's; a job whose worker is killed runs again; a bad texture fails alone, with its one-line error in the
+summary; Ctrl-C leaves no half files, and ``--resume`` runs only the jobs that did not finish. Jobs are the
+``preview`` preset at 4 views, on the donut and a small torus."""
 
 from __future__ import annotations
 
@@ -123,7 +124,8 @@ def test_a_job_whose_worker_is_killed_runs_again(cluster, inputs, tmp_path):
     assert not list((tmp_path / "out").rglob(".*.tmp"))
 
 
-def test_a_bad_texture_fails_alone_with_its_one_line_error(cluster, inputs, tmp_path, capsys):
+def test_a_bad_texture_fails_alone_with_its_one_line_error(inputs, tmp_path, capsys):
+    """On the command's own local cluster (two worker processes it starts and stops)."""
     bad = tmp_path / "bad.png"
     bad.write_bytes(b"not an image")
     manifest = tmp_path / "jobs.csv"
@@ -132,9 +134,10 @@ def test_a_bad_texture_fails_alone_with_its_one_line_error(cluster, inputs, tmp_
         f"{inputs['torus']},{bad},preview,4\n"
     )
     out = tmp_path / "out"
-    argv = ["batch", str(manifest), "--out", str(out), "--scheduler", cluster.scheduler.address, "--threads", "1"]
-    assert cli.main(argv) == 2
-    err = capsys.readouterr().err.strip().splitlines()
+    assert cli.main(["batch", str(manifest), "--out", str(out), "--workers", "2", "--threads", "1"]) == 2
+    shown, err = capsys.readouterr()
+    assert shown.startswith("running on a local Dask cluster: 2 workers, 2 jobs at once")
+    err = err.strip().splitlines()
     assert err == [f"gt2gs: error: 1 of 2 jobs failed; see {out / 'summary.md'}"]
     table = (out / "summary.md").read_text()
     (failed,) = [line for line in table.splitlines() if "| failed |" in line]
