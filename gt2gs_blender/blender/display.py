@@ -22,7 +22,7 @@ from __future__ import annotations
 import bpy
 
 from ..core.scene.inria import SH_C0
-from . import views
+from . import compat, views
 
 GROUP_NAME = "GT2GS Splats v2"
 MATERIAL_NAME = "GT2GS Splat Display v2"
@@ -175,7 +175,8 @@ def _build_group(group: bpy.types.GeometryNodeTree, material: bpy.types.Material
 
     # Viewport density: keep a seeded random fraction; drop splats that can never reach alpha 1/255.
     keep = n.add("FunctionNodeRandomValue", {"Probability": inp["Density"], "Seed": 7}, data_type="BOOLEAN")
-    thin = n.add("FunctionNodeBooleanMath", {0: viewport, 1: keep.outputs[3]}, operation="NIMPLY").outputs[0]
+    kept = _socket(keep.outputs, "Value")  # the Boolean one: 5.2 has one output, earlier versions one per type
+    thin = n.add("FunctionNodeBooleanMath", {0: viewport, 1: kept}, operation="NIMPLY").outputs[0]
     faint = n.math("LESS_THAN", opacity, ALPHA_MIN)
     drop = n.add("FunctionNodeBooleanMath", {0: thin, 1: faint}, operation="OR").outputs[0]
     points = n.add("GeometryNodeDeleteGeometry", {"Geometry": inp["Geometry"], "Selection": drop}, domain="POINT")
@@ -191,7 +192,8 @@ def _build_group(group: bpy.types.GeometryNodeTree, material: bpy.types.Material
         capture.capture_items.new("FLOAT" if name in ("opacity", "sx", "sy") else "VECTOR", name)
         n.feed(capture.inputs[name], value)
     n.feed(capture.inputs[0], far_first.outputs[0])
-    bare = n.add("GeometryNodeRemoveAttribute", {0: capture.outputs[0], "Pattern Mode": "Wildcard", "Name": "*"})
+    wildcard, mode = compat.wildcard_removal()
+    bare = n.add("GeometryNodeRemoveAttribute", {0: capture.outputs[0], **wildcard, "Name": "*"}, **mode)
     quad = n.add("GeometryNodeMeshGrid", {"Size X": 2.0, "Size Y": 2.0, "Vertices X": 2, "Vertices Y": 2})
     scale = n.add("ShaderNodeCombineXYZ", {0: capture.outputs["sx"], 1: capture.outputs["sy"], 2: 1.0}).outputs[0]
     inst = n.add(
@@ -245,6 +247,7 @@ def _build_material(material: bpy.types.Material) -> None:
     material.use_transparency_overlap = True
     material.use_transparent_shadow = True
     material.diffuse_color = (0.8, 0.8, 0.8, 1.0)
+    compat.use_nodes(material)
     tree = material.node_tree
     tree.nodes.clear()
     n = _Nodes(tree)
@@ -318,10 +321,7 @@ def apply_display(
 
 def _drive_render_size(obj: bpy.types.Object, modifier: bpy.types.NodesModifier, scene: bpy.types.Scene) -> None:
     """Keep Render Size equal to the scene's larger output side (a simple-expression driver, no Python)."""
-    item = next(
-        i for i in modifier.node_group.interface.items_tree if i.item_type == "SOCKET" and i.name == "Render Size"
-    )
-    path = f'modifiers["{modifier.name}"]["{item.identifier}"]'
+    path = compat.modifier_input_path(modifier, _identifier(modifier, "Render Size"))
     obj.driver_remove(path)
     driver = obj.driver_add(path).driver
     driver.type = "SCRIPTED"
@@ -344,16 +344,20 @@ def display_modifier(obj: bpy.types.Object) -> bpy.types.NodesModifier | None:
     return None
 
 
+def _identifier(modifier: bpy.types.NodesModifier, name: str) -> str:
+    """The identifier of the modifier's group input ``name``."""
+    items = modifier.node_group.interface.items_tree
+    return next(i.identifier for i in items if i.item_type == "SOCKET" and i.in_out == "INPUT" and i.name == name)
+
+
 def set_input(modifier: bpy.types.NodesModifier, name: str, value) -> None:
     """Set the modifier's group input ``name``."""
-    item = next(i for i in modifier.node_group.interface.items_tree if i.item_type == "SOCKET" and i.name == name)
-    modifier[item.identifier] = value
+    compat.set_modifier_input(modifier, _identifier(modifier, name), value)
 
 
 def get_input(modifier: bpy.types.NodesModifier, name: str):
     """The modifier's value for group input ``name``."""
-    item = next(i for i in modifier.node_group.interface.items_tree if i.item_type == "SOCKET" and i.name == name)
-    return modifier[item.identifier]
+    return compat.get_modifier_input(modifier, _identifier(modifier, name))
 
 
 def setup_scene(scene: bpy.types.Scene) -> None:

@@ -33,7 +33,7 @@ from ..core.scene.arrays import SplatArrays
 from ..core.scene.inria import POSITION_NAMES, REST_PREFIX, SH_C0, core_groups, core_property_names, tensor_view
 from ..core.scene.ply_header import SCALAR_TYPES, TYPE_FOR_CODE, type_code
 from ..core.scene.ply_write import write_layout
-from . import display, transform
+from . import compat, display, transform
 
 COLOR_ATTRIBUTE = "Col"
 RADIUS_ATTRIBUTE = "radius"
@@ -124,6 +124,7 @@ def scene_to_object(
             master.objects.unlink(obj)
         cloud = obj.data
         created.append(cloud)
+        compat.drop_converted_selection(cloud)
         created.remove(mesh)
         with contextlib.suppress(ReferenceError):  # the conversion may already have freed it
             bpy.data.meshes.remove(mesh)  # left without users by the conversion
@@ -244,8 +245,7 @@ def ensure_material() -> tuple[bpy.types.Material, bool]:
     material = bpy.data.materials.new(MATERIAL_NAME)
     try:
         material[MATERIAL_TAG] = True
-        if bpy.app.version < (5, 0, 0):
-            material.use_nodes = True  # always on (and deprecated) from 5.0
+        compat.use_nodes(material)
         nodes, links = material.node_tree.nodes, material.node_tree.links
         nodes.clear()
         attribute = nodes.new("ShaderNodeAttribute")
