@@ -27,7 +27,7 @@ from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.scene.ply_write import write_ply
 
-from .test_worker import OUT_OF_MEMORY, address_space_cap, needs_prlimit
+from .worker_tools import OUT_OF_MEMORY, address_space_cap, needs_prlimit
 
 REPO = Path(__file__).resolve().parents[1]
 DONUT = REPO.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"

@@ -14,6 +14,8 @@ from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.presets import PRESETS, preset
 from gt2gs_blender.core.transfer.views import ViewSet
 
+from .worker_tools import stripes
+
 
 def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
     """A fuzzy coloured ball of Gaussians with an extra property, like a small real scene."""
@@ -29,13 +31,6 @@ def blob_scene(n: int = 1500, seed: int = 0) -> GaussianScene:
     )
     scene.extras = {"confidence": np.arange(n, dtype=np.float32)}
     return scene
-
-
-def stripes(size: int = 96) -> np.ndarray:
-    """A high-contrast diagonal stripe texture."""
-    y, x = np.mgrid[0:size, 0:size]
-    band = ((x + y) // 6) % 2
-    return np.stack([band * 0.9 + 0.05, band * 0.3 + 0.2, 1.0 - band * 0.8], axis=-1).astype(np.float32)
 
 
 def tiny(**overrides) -> TransferConfig:

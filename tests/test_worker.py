@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import functools
 import json
 import os
-import re
 import resource
 import signal
 import subprocess
@@ -26,7 +24,8 @@ from gt2gs_blender.core.scene.ply import read_ply_arrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 
 from .test_bad_inputs import BLIND_CAMERAS
-from .test_transfer import blob_scene, stripes
+from .test_transfer import blob_scene
+from .worker_tools import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit, stripes
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = dict(
@@ -39,42 +38,6 @@ TINY = dict(
     evaluate=False,
     preview_every=2,
 )
-
-
-HEADROOM = 1 << 30
-"""Address space a capped worker may add to what torch and the engine take once loaded: a tiny job
-peaks ~150 MiB above that, a job at 4096 px needs several GiB."""
-OUT_OF_MEMORY = re.compile(
-    rf"ran out of memory( \(an allocation of [\d.]+ (bytes|MiB|GiB) failed\))?: "
-    rf"{re.escape(MEMORY_ADVICE)}"
-)
-"""The message of a failed allocation: torch's allocators say the size; a bare MemoryError does not."""
-needs_prlimit = pytest.mark.skipif(
-    not hasattr(resource, "prlimit") or not Path("/proc/self/status").exists(),
-    reason="capping another process's address space needs Linux",
-)
-
-
-@functools.cache
-def address_space_cap() -> int:
-    """Bytes of address space for a capped worker: what a fresh Python takes once torch and the
-    engine are loaded (as the worker will have them), plus HEADROOM."""
-    probe = (
-        "import pathlib, gt2gs_blender.core.transfer.pipeline, gt2gs_blender.core.transfer.visibility; "
-        "print(next(l.split()[1] for l in pathlib.Path('/proc/self/status').read_text().splitlines() "
-        "if l.startswith('VmSize:')))"
-    )
-    result = subprocess.run(
-        [sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=120, check=True
-    )
-    return int(result.stdout) * 1024 + HEADROOM
-
-
-def colours_differ(a: np.ndarray, b: np.ndarray, tol: float = 0.02) -> bool:
-    """Whether DC colours (N,3) changed: per Gaussian when the counts match, else (densified) on average."""
-    if a.shape == b.shape:
-        return float(np.abs(a - b).mean()) > tol
-    return float(np.abs(a.mean(axis=0) - b.mean(axis=0)).max()) > tol
 
 
 def job_with_inputs() -> Job:
@@ -322,12 +285,20 @@ def test_worker_command_line_exit_status(tmp_path):
 
 
 def test_pins_match_requirements_txt():
-    pinned = dict(
-        line.split("==")
-        for line in (ROOT / "requirements.txt").read_text().splitlines()
-        if "==" in line and not line.startswith("#")
-    )
-    assert {name: pinned[name] for name in deps.PINS} == deps.PINS
+    """Python 3.11's pins are requirements.txt's; 3.13's numpy and OpenCV are requirements-py313.txt's (the
+    Blender 5.2 tests' environment: no torch wheel for 3.13 is installed here)."""
+
+    def pinned(name: str) -> dict[str, str]:
+        lines = (ROOT / name).read_text().splitlines()
+        return dict(line.split("==") for line in lines if "==" in line and not line.startswith("#"))
+
+    py311, py313 = deps.PINS_BY_PYTHON[(3, 11)], deps.PINS_BY_PYTHON[(3, 13)]
+    assert {name: pinned("requirements.txt")[name] for name in py311} == py311
+    tested = ("numpy", "opencv-contrib-python-headless")
+    assert {name: pinned("requirements-py313.txt")[name] for name in tested} == {name: py313[name] for name in tested}
+    assert deps.PINS_BY_PYTHON[(3, 13)]["numpy"].startswith("2.")  # numpy 1.26 has no wheel for 3.13
+    with pytest.raises(ValueError, match=r"no tested packages for Python 3\.12 \(tested: 3\.11, 3\.13\)"):
+        deps.pinned_packages((3, 12))
 
 
 def test_install_command_targets_the_deps_folder():

@@ -1,8 +1,10 @@
 """The engine's Python dependencies inside Blender: what is installed where, and the pip command that
 installs the pinned versions into the extension's own folder (torch is too big to ship in the zip).
 
-Blender's Python never imports these packages: the worker process gets the folder on its
-``PYTHONPATH``. Versions are read from package metadata, so nothing heavy is imported to check them.
+Blender's Python never imports these packages: the worker process gets the folder on its ``PYTHONPATH``.
+``dependency_status`` reads versions from package metadata (nothing heavy is imported, so the preferences
+can draw it); ``import_check`` imports each package, and runs in the worker's Python as part of the machine
+check, since a package built for another Python has metadata but does not load.
 """
 
 from __future__ import annotations
@@ -13,14 +15,25 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-PINS: dict[str, str] = {
-    "torch": "2.13.0",
-    "numpy": "1.26.4",
-    "opencv-contrib-python-headless": "4.11.0.86",
-    "ninja": "1.13.0",
-    "numba": "0.68.1",
+PINS_BY_PYTHON: dict[tuple[int, int], dict[str, str]] = {
+    (3, 11): {
+        "torch": "2.13.0",
+        "numpy": "1.26.4",
+        "opencv-contrib-python-headless": "4.11.0.86",
+        "ninja": "1.13.0",
+        "numba": "0.68.1",
+    },
+    (3, 13): {
+        "torch": "2.13.0",
+        "numpy": "2.4.6",
+        "opencv-contrib-python-headless": "4.11.0.86",
+        "ninja": "1.13.0",
+        "numba": "0.68.1",
+    },
 }
-"""The runtime packages of requirements.txt with their pinned versions (a test keeps the two equal)."""
+"""The runtime packages with their pinned versions for each Python a supported Blender runs (4.5 and 5.0:
+3.11, requirements.txt's, which a test keeps equal; 5.1 and 5.2: 3.13, with numpy 2, as 1.26 has no wheel for
+it and requirements-py313.txt's numpy)."""
 MODULES: dict[str, str] = {"torch": "torch", "numpy": "numpy", "opencv-contrib-python-headless": "cv2"}
 """Distribution -> module the engine imports (ninja only speeds up the C++ build, numba runs the fast rasterizer
 where no C++ compiler is: neither is required)."""
@@ -51,6 +64,15 @@ class Dependency:
         return self.version is not None and self.version.split("+")[0] == self.pinned
 
 
+def pinned_packages(version: tuple[int, int] | None = None) -> dict[str, str]:
+    """The pinned packages for Python ``version`` (this one by default); ValueError for a Python with none."""
+    version = version or sys.version_info[:2]
+    if version not in PINS_BY_PYTHON:
+        tested = ", ".join(f"{major}.{minor}" for major, minor in PINS_BY_PYTHON)
+        raise ValueError(f"no tested packages for Python {version[0]}.{version[1]} (tested: {tested})")
+    return PINS_BY_PYTHON[version]
+
+
 def search_path(deps_dir: str | os.PathLike | None) -> list[str]:
     """Where the worker looks for packages: the deps folder first, then this Python's own path."""
     return ([os.fspath(deps_dir)] if deps_dir else []) + [p for p in sys.path if p]
@@ -59,20 +81,42 @@ def search_path(deps_dir: str | os.PathLike | None) -> list[str]:
 def dependency_status(deps_dir: str | os.PathLike | None = None) -> list[Dependency]:
     """The installed version of each required package, as the worker (deps folder first) will see it."""
     path = search_path(deps_dir)
+    pinned = PINS_BY_PYTHON.get(sys.version_info[:2], {})
     status = []
     for dist, module in MODULES.items():
         found = next(iter(importlib.metadata.distributions(name=dist, path=path)), None)
-        status.append(Dependency(dist, module, None if found is None else found.version, PINS[dist]))
+        status.append(Dependency(dist, module, None if found is None else found.version, pinned.get(dist, "none")))
     return status
 
 
-def install_command(
-    python: str, target: str | os.PathLike, build: str = "CPU", pins: dict[str, str] | None = None
-) -> list[str]:
-    """The pip command installing the pinned packages into ``target`` (torch from the chosen build's index)."""
+def import_check() -> dict[str, dict[str, str | None]]:
+    """Each required package imported in this Python: module -> its version, or why it does not load."""
+    found: dict[str, dict[str, str | None]] = {}
+    for module in MODULES.values():
+        try:
+            loaded = importlib.import_module(module)
+        except Exception as exc:  # any failure to load is what the user must see (ImportError, OSError, ...)
+            found[module] = {"version": None, "error": load_error(exc)}
+        else:
+            found[module] = {"version": str(getattr(loaded, "__version__", "?")), "error": None}
+    return found
+
+
+def load_error(exc: BaseException) -> str:
+    """One line for a failed import: the innermost error it was raised from (a compiled part that does not
+    load, as in a package built for another Python, rather than the advice printed around it), first line."""
+    while (exc.__cause__ or exc.__context__) is not None:
+        exc = exc.__cause__ or exc.__context__
+    text = next((part.strip() for part in str(exc).splitlines() if part.strip()), "")
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+def install_command(python: str, target: str | os.PathLike, build: str = "CPU") -> list[str]:
+    """The pip command installing this Python's pinned packages into ``target`` (torch from the chosen build's
+    index); ``python`` is this Python, as Blender runs it."""
     if build not in TORCH_INDEX:
         raise ValueError(f"build must be one of {', '.join(TORCH_INDEX)}, got {build!r}")
-    requirements = [f"{name}=={version}" for name, version in (pins or PINS).items()]
+    requirements = [f"{name}=={version}" for name, version in pinned_packages().items()]
     return [
         python,
         "-m",

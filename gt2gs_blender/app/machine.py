@@ -1,8 +1,10 @@
 """What a run would use on this machine: feature weights, rasterizer, C++ compiler, CUDA, kernel cache.
 
 ``python -m gt2gs_blender.app.machine [--weights PATH] [--features F] [--backend B] [--device D] [--download]``
-prints it as one JSON object on stdout. Blender runs it with the worker's Python (torch never loads into
-Blender) to fill its preferences and to know whether CUDA is there; ``--download`` first fetches
+prints it as one JSON object on stdout, with ``packages``: each required package imported here (its version,
+or why it does not load; then the object is ``{"error": ..., "packages": ...}``). Blender runs it with the
+worker's Python (torch never loads into Blender) to fill its preferences and to know whether CUDA is there;
+``--download`` first fetches
 torchvision's VGG-16 weights into torch's hub cache. Nothing is compiled here: the kernel's state is read
 from its cache.
 """
@@ -16,6 +18,7 @@ import sys
 from typing import Any
 
 from ..core.errors import GT2GSError
+from .deps import import_check
 
 RASTERIZERS = {"cpu": "compiled CPU kernel", "torch": "portable torch", "gsplat": "gsplat CUDA"}
 """What the preferences call each rasterizer backend."""
@@ -92,6 +95,13 @@ def machine_info(
     return info
 
 
+def _problem(module: str, error: str) -> str:
+    """What is wrong with a required package, in a few words."""
+    if error == f"ModuleNotFoundError: No module named '{module}'":
+        return f"{module} is not installed"
+    return f"{module} does not load: {error}"
+
+
 def main(argv: list[str] | None = None) -> int:
     """Print the machine description as JSON (after downloading the weights when asked); 1 on an error."""
     parser = argparse.ArgumentParser(prog="python -m gt2gs_blender.app.machine", description=__doc__)
@@ -101,6 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", default="auto")
     parser.add_argument("--download", action="store_true", help="download torchvision's VGG-16 weights first")
     args = parser.parse_args(argv)
+    packages = import_check()
+    broken = [_problem(module, found["error"]) for module, found in packages.items() if found["error"]]
+    if broken:
+        advice = " (Install Dependencies installs them for this Python)"
+        print(json.dumps({"error": "; ".join(broken) + advice, "packages": packages}))
+        return 1
     try:
         if args.download:
             from ..core.features.weights import download_vgg16
@@ -108,9 +124,9 @@ def main(argv: list[str] | None = None) -> int:
             download_vgg16(True)
         info = machine_info(args.weights, args.features, args.backend, args.device)
     except GT2GSError as exc:
-        print(json.dumps({"error": str(exc)}))
+        print(json.dumps({"error": str(exc), "packages": packages}))
         return 1
-    print(json.dumps(info))
+    print(json.dumps(info | {"packages": packages}))
     return 0
 
 

@@ -1,10 +1,10 @@
 """A worker process seen from Blender: start it, poll it without blocking, cancel it, clean up after it.
 
-bpy-free (plain subprocess and threads), so the modal operator, the headless operator and tests
-drive the same object. The worker (``app/worker.py``) runs under ``sys.executable`` - Blender's
-own Python inside Blender - with the extension's dependency folder first on ``PYTHONPATH``. Its
-JSON-line events are read by a thread into a queue, so ``poll()`` never waits on the pipe. Every
-file of a job lives in one temporary folder, removed by ``cleanup()`` once the process has ended.
+bpy-free (plain subprocess and threads), so the modal operator, the headless operator and tests drive the same
+object. The worker (``app/worker.py``) runs under ``worker_python()`` - Blender's own Python inside Blender,
+unless ``GT2GS_WORKER_PYTHON`` names another - with the extension's dependency folder first on ``PYTHONPATH``.
+Its JSON-line events are read by a thread into a queue, so ``poll()`` never waits on the pipe. Every file of a
+job lives in one temporary folder, removed by ``cleanup()`` once the process has ended.
 """
 
 from __future__ import annotations
@@ -32,6 +32,9 @@ from ..core.errors import MEMORY_ADVICE
 PACKAGE_DIR = Path(__file__).resolve().parents[1]
 """The extension's package folder; the worker is imported from its parent under the same name."""
 WORKER_MODULE = f"{PACKAGE_DIR.name}.app.worker"
+WORKER_PYTHON_VARIABLE = "GT2GS_WORKER_PYTHON"
+"""Names a Python with the engine's packages to run the worker and the machine check in (tests on a Blender
+whose Python has no torch wheel here, developers with their own environment); unset: Blender's own."""
 CANCEL_GRACE_S = 5.0
 """How long a cancelled worker may take to stop by itself before it is killed."""
 STDERR_LINES = 40
@@ -65,6 +68,11 @@ class JobStatus:
         return self.state in FINISHED_STATES
 
 
+def worker_python() -> str:
+    """The Python the worker and the machine check run in."""
+    return os.environ.get(WORKER_PYTHON_VARIABLE) or sys.executable
+
+
 def worker_env(deps_dir: str | os.PathLike | None, env: dict[str, str] | None = None) -> dict[str, str]:
     """The environment of a process run with the worker's Python: the extension's dependencies and the
     package itself on ``PYTHONPATH``, unbuffered output."""
@@ -81,7 +89,7 @@ class Job:
         self, *, python: str | None = None, deps_dir: str | os.PathLike | None = None, env: dict[str, str] | None = None
     ) -> None:
         self.folder = Path(tempfile.mkdtemp(prefix="gt2gs_job_"))
-        self.python = python or sys.executable
+        self.python = python or worker_python()
         self.deps_dir = deps_dir
         self.env = dict(os.environ if env is None else env)
         self.status = JobStatus()

@@ -10,14 +10,14 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import subprocess
-import sys
 import threading
 from dataclasses import dataclass, field
 from typing import Any
 
 from ..core.transfer.presets import GPU_PRESETS, gpu_preset_problem
-from .job import PACKAGE_DIR, worker_env
+from .job import PACKAGE_DIR, worker_env, worker_python
 
 MODULE = f"{PACKAGE_DIR.name}.app.machine"
 PROBE_TIMEOUT_S = 180.0
@@ -35,6 +35,8 @@ class MachineState:
     running: str | None = None
     """None, ``"probe"`` or ``"download"`` while that runs."""
     settings: dict[str, Any] = field(default_factory=dict)
+    packages: dict[str, dict[str, str | None]] | None = None
+    """Each required package as the last check imported it in the worker's Python (version or error)."""
 
 
 _state = MachineState()
@@ -49,7 +51,7 @@ def current() -> MachineState:
 def command(settings: dict[str, Any], download: bool = False) -> list[str]:
     """The probe's command line for these machine settings (``weights_path``, ``features``, ``backend``,
     ``device``; missing ones: the engine's defaults)."""
-    args = [sys.executable, "-m", MODULE]
+    args = [worker_python(), "-m", MODULE]
     for name in MACHINE_SETTINGS:
         if settings.get(name) is not None:
             args += [f"--{name.removesuffix('_path')}", str(settings[name])]
@@ -71,30 +73,36 @@ def probe(
             cwd=os.path.expanduser("~"),
         )
     except (OSError, subprocess.SubprocessError) as exc:
-        info, error = None, f"the worker's Python could not run ({type(exc).__name__}: {exc})"
+        answer, error = {}, f"the worker's Python could not run ({type(exc).__name__}: {exc})"
     else:
-        info, error = _answer(result)
+        answer, error = _answer(result)
+    info = None if error else answer
     with _lock:
         _state.info = info if info is not None else _state.info
+        _state.packages = answer.get("packages", _state.packages)
         _state.error, _state.running, _state.settings = error, None, dict(settings)
     return info, error
 
 
-def _answer(result: subprocess.CompletedProcess) -> tuple[dict[str, Any] | None, str | None]:
-    """The probe's JSON line, or why there is none."""
+def _answer(result: subprocess.CompletedProcess) -> tuple[dict[str, Any], str | None]:
+    """The probe's JSON object and None, or what it said (or {}) and why it failed."""
     lines = [line for line in result.stdout.splitlines() if line.startswith("{")]
     try:
         answer = json.loads(lines[-1]) if lines else None
     except ValueError:
         answer = None
-    if isinstance(answer, dict) and "error" not in answer:
-        return answer, None
     if isinstance(answer, dict):
-        return None, str(answer["error"])
-    tail = [line for line in result.stderr.splitlines() if line.strip()][-1:]
-    if "ModuleNotFoundError" in result.stderr:
-        return None, "the engine's dependencies are missing: install them above"
-    return None, f"the machine check exited with status {result.returncode}" + (f": {tail[0]}" if tail else "")
+        return answer, (str(answer["error"]) if "error" in answer else None)
+    cause = error_line(result.stderr)
+    return {}, f"the machine check exited with status {result.returncode}" + (f": {cause}" if cause else "")
+
+
+def error_line(stderr: str) -> str | None:
+    """The line of a Python traceback that names the error (the last ``SomeError: ...`` line, not the end of a
+    long message), else the last line."""
+    lines = [line.strip() for line in stderr.splitlines() if line.strip()]
+    named = [line for line in lines if re.match(r"^[A-Za-z_][\w.]*(Error|Exception|Interrupt|Exit)\b", line)]
+    return (named or lines or [None])[-1]
 
 
 def start(settings: dict[str, Any], deps_dir: str | None, download: bool = False) -> bool:

@@ -1,4 +1,5 @@
-"""Install dependencies: pip installs the pinned engine packages into the extension's user folder.
+"""Install dependencies: pip installs the engine packages pinned for Blender's Python into the extension's
+user folder, then the machine check imports them in the worker's Python (versions alone do not say they load).
 
 Runs pip in a subprocess polled by a timer, so Blender stays responsive during the download. Only
 when Blender allows online access (the manifest declares the network permission).
@@ -15,6 +16,7 @@ import bpy
 
 from ..app import deps
 from ..blender import addon
+from . import machine as machine_ops
 
 POLL_S = 0.5
 
@@ -43,6 +45,11 @@ class GT2GS_OT_install_dependencies(bpy.types.Operator):
             return False
         if addon.deps_dir() is None:
             cls.poll_message_set("Only the installed extension can install its dependencies")
+            return False
+        try:
+            deps.pinned_packages()
+        except ValueError as exc:
+            cls.poll_message_set(f"This Blender's Python has {exc}")
             return False
         return True
 
@@ -74,7 +81,8 @@ class GT2GS_OT_install_dependencies(bpy.types.Operator):
         if self._process.returncode != 0:
             self.report({"ERROR"}, "pip failed: " + (lines[-1] if lines else f"exit status {self._process.returncode}"))
             return {"CANCELLED"}
-        self.report({"INFO"}, "Dependencies installed")
+        machine_ops.check(context)
+        self.report({"INFO"}, "Dependencies installed: checking that they load (What a Transfer Uses, below)")
         return {"FINISHED"}
 
 

@@ -27,14 +27,21 @@ def _machine_changed(self, context) -> None:
     machine_ops.check(context)
 
 
-def dependency_rows(deps_dir: str | None) -> list[tuple[str, str, bool]]:
-    """(package, what is installed, ok) per required package, as the worker will see them."""
+def dependency_rows(deps_dir: str | None, state: machine.MachineState) -> list[tuple[str, str, bool]]:
+    """(package, what is installed, ok) per required package: the version the worker's search path holds and,
+    once a machine check has run, whether it loads in the worker's Python (one built for another does not)."""
     rows = []
     for dep in deps.dependency_status(deps_dir):
-        found = f"{dep.version}" if dep.ok else "missing"
-        if dep.ok and not dep.matches_pin:
+        loaded = (state.packages or {}).get(dep.module)
+        if loaded is not None and loaded["error"]:
+            missing = loaded["error"] == f"ModuleNotFoundError: No module named '{dep.module}'"
+            rows.append((dep.module, "missing" if missing else f"does not load: {loaded['error']}", False))
+            continue
+        version = dep.version or (loaded or {}).get("version")
+        found = version or "missing"
+        if dep.version and not dep.matches_pin:
             found += f" (tested: {dep.pinned})"
-        rows.append((dep.module, found, dep.ok))
+        rows.append((dep.module, found, version is not None))
     return rows
 
 
@@ -83,6 +90,7 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
     __annotations__ = {
         "build": EnumProperty(
             name="Torch Build",
+            description="Which torch Install Dependencies downloads",
             default="CPU",
             items=(
                 ("CPU", "CPU", "The CPU-only torch (smaller download, any machine)"),
@@ -98,7 +106,7 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
         box.label(text="Python Dependencies (used by the transfer worker)")
         folder = addon.deps_dir()
         column = box.column(align=True)
-        for module, found, ok in dependency_rows(folder):
+        for module, found, ok in dependency_rows(folder, machine.current()):
             row = column.split(factor=0.3)
             row.label(text=module, icon="CHECKMARK" if ok else "ERROR")
             row.label(text=found)
