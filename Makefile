@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test lint bench venv clean
+.PHONY: demo test test-blender52 lint build bench venv clean
 
 venv: $(STAMP)
 
@@ -13,6 +13,20 @@ $(STAMP): requirements.txt
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -r requirements.txt
 	touch $(STAMP)
+
+# Blender 5.2 LTS runs Python 3.13: its bpy (5.2.3) and numpy 2 in a venv of their own (pyenv's 3.13 when
+# python3.13 is not on PATH; PYTHON313=... to choose).
+PYTHON313 ?= $(shell for p in python3.13 $${PYENV_ROOT:-$$HOME/.pyenv}/versions/3.13*/bin/python3.13; do \
+	$$p -c '' 2>/dev/null && { echo $$p; break; }; done)
+VENV313 := .venv313
+STAMP313 := $(VENV313)/.installed
+
+$(STAMP313): requirements-py313.txt
+	@test -n "$(PYTHON313)" || { echo "no Python 3.13 found for the Blender 5.2 tests: set PYTHON313"; exit 1; }
+	$(PYTHON313) -m venv $(VENV313)
+	$(VENV313)/bin/python -m pip install --quiet --upgrade pip
+	$(VENV313)/bin/python -m pip install --quiet -r requirements-py313.txt
+	touch $(STAMP313)
 
 # splat-transform (npm, package.json): the tests' oracle for the splat formats; without npm they skip and say so.
 NODE_STAMP := node_modules/.installed
@@ -25,6 +39,13 @@ demo: $(STAMP)
 # Tests use the real ImageNet weights from ../shared (one test covers the no-weights fallback itself).
 test: $(STAMP) $(NODE_STAMP) lint
 	GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} $(PY) -m pytest -q
+	$(MAKE) test-blender52
+
+# The Blender edge (tests/blender) and the numpy-only readers on bpy 5.2.3 / Python 3.13 / numpy 2. The worker
+# and the machine check run on .venv's Python (torch), as an artist's would on the installed dependencies.
+test-blender52: $(STAMP) $(STAMP313) $(NODE_STAMP)
+	GT2GS_WORKER_PYTHON=$(abspath $(PY)) GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} \
+	  $(VENV313)/bin/python -m pytest -q tests/blender tests/test_fuzz_readers.py
 
 # Style and architecture: ruff (lint + format) and the import contracts in pyproject.toml.
 lint: $(STAMP)
@@ -32,8 +53,15 @@ lint: $(STAMP)
 	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/lint-imports
 
+# The extension zip, dist/gt2gs_blender-<version>.zip, by Blender's own extension tool from the bpy wheel
+# (Blender's tool refuses a missing output folder, so it is made first).
+build: $(STAMP)
+	mkdir -p dist
+	$(PY) "$$($(PY) -c 'import bpy; print(bpy.utils.system_resource("SCRIPTS"))' | tail -n 1)/addons_core/bl_pkg/cli/blender_ext.py" \
+	  build --source-dir gt2gs_blender --output-dir dist
+
 bench: $(STAMP)
 	$(PY) bench/raster.py --quick
 
 clean:
-	rm -rf $(VENV) bench/out .pytest_cache
+	rm -rf $(VENV) $(VENV313) dist bench/out .pytest_cache

@@ -29,6 +29,44 @@ PATH_SETTINGS = {
     "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"
 }
 """Path settings whose tooltip in Blender says more than the command line's."""
+CHOICE_HELP: dict[str, dict[str, str]] = {
+    "up": {
+        "+z": "+Z is up (Blender's convention)",
+        "-z": "-Z is up",
+        "+y": "+Y is up",
+        "-y": "-Y is up (a capture from a 3DGS trainer, whose cameras have -Y up)",
+        "+x": "+X is up",
+        "-x": "-X is up",
+        "auto": "Estimated from the splats",
+    },
+    "layout_projection": {
+        "auto": "View when every view looks within 45° of the views' mean direction, else Box",
+        "box": "Wraps the texture around an object seen from all sides",
+        "view": "Throws the texture from the first view like a slide projector (a capture seen from the front)",
+    },
+    "stylise_geometry": {
+        "auto": "On for a capture seen from the front, off for an object seen from all sides",
+        "on": "The texture loss also moves, scales and turns the splats: bolder texture, looser shape",
+        "off": "The splats keep their place, size and turn: the shape is kept",
+    },
+    "features": {
+        "auto": "The best network whose weights are found",
+        "vgg16_relu3": "VGG-16 features (torchvision's ImageNet weights, vgg16-397923af.pth)",
+        "vgg19_norm_relu3": "The normalised VGG-19 of style transfer (vgg19_normalised_to_relu3_1.pth)",
+    },
+    "device": {
+        "auto": "A CUDA GPU when there is one, else the CPU",
+        "cpu": "The CPU",
+        "cuda": "An NVIDIA GPU through CUDA",
+    },
+    "backend": {
+        "auto": "The fastest available",
+        "torch": "Portable torch rasterizer: runs anywhere, slower",
+        "cpu": "Compiled CPU kernel (built once, at the first run)",
+        "gsplat": "gsplat's CUDA kernels (NVIDIA GPU)",
+    },
+}
+"""What each choice of a choice setting means, for its menu's tooltips (a test checks every choice has one)."""
 
 
 def annotations(where: str, updates: dict[str, Callable] | None = None) -> dict[str, Any]:
@@ -50,25 +88,28 @@ def _property(name: str, meta: Setting, kind: type, update: Callable | None) -> 
     if kind is tuple:
         return FloatVectorProperty(default=default, size=len(default), subtype="COLOR", min=0.0, max=1.0, **common)
     if meta.choices:
-        items = tuple((choice, choice.replace("_", " ").title(), "") for choice in meta.choices)
+        helps = CHOICE_HELP.get(name, {})
+        items = tuple((c, c.replace("_", " ").title(), helps.get(c, meta.help)) for c in meta.choices)
         return EnumProperty(items=items, default=default, **common)
     if kind is str:
         return StringProperty(default=default or "", subtype="DIR_PATH", **common)
     if meta.unit == DEGREES:
         limits = {key: math.radians(v) for key, v in (("min", meta.min), ("max", meta.max)) if v is not None}
         return FloatProperty(default=math.radians(default), subtype="ANGLE", **limits, **common)
-    return (IntProperty if kind is int else FloatProperty)(default=default, **_limits(meta, kind), **common)
+    return (IntProperty if kind is int else FloatProperty)(default=default, **_limits(name, meta, kind), **common)
 
 
-def _limits(meta: Setting, kind: type) -> dict[str, Any]:
-    """min / max / soft_max keywords of a number property (and a precision that shows small weights)."""
+def _limits(name: str, meta: Setting, kind: type) -> dict[str, Any]:
+    """min / max / soft_max keywords of a number property, and for a float the decimals it shows: 2, or 3 where a
+    preset's value has a third (Blender shows more for a value smaller than that, such as 0.0005)."""
     limits = {
         key: kind(value)
         for key, value in (("min", meta.min), ("max", meta.max), ("soft_max", meta.soft_max))
         if value is not None
     }
     if kind is float:
-        limits["precision"] = 4
+        values = [getattr(preset, name) for preset in PRESETS.values()]
+        limits["precision"] = 2 if all(round(v, 2) == v or abs(v) < 0.01 for v in values) else 3
     return limits
 
 

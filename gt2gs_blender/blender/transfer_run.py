@@ -71,8 +71,8 @@ class RunError(Exception):
 
 @dataclass
 class Outcome:
-    """How the last run ended, for the panel: state, a message, the report, the result object's name, and how the
-    result was applied (``NEW`` or ``IN_PLACE``)."""
+    """How the last run ended, for the panel: state, a message, the report, the result object's name, how the
+    result was applied (``NEW`` or ``IN_PLACE``) and the object it was made from (hidden under a new result)."""
 
     state: str
     message: str
@@ -80,6 +80,7 @@ class Outcome:
     result: str | None = None
     seconds: float = 0.0
     mode: str = "NEW"
+    source: str | None = None
 
 
 ACTIVE: dict[str, TransferRun] = {}
@@ -177,13 +178,23 @@ def view_spec(context, obj, job: Job, overrides: dict[str, Any]) -> str | int | 
     return "cameras.json"
 
 
+def texture_missing(settings) -> str | None:
+    """Why a transfer has no texture yet (the panel disables Transfer with it), None once one is chosen."""
+    if settings.texture_source == "FILE" and not settings.texture_path:
+        return "choose a texture file (or an image) first"
+    if settings.texture_source == "IMAGE" and settings.texture_image is None:
+        return "choose a texture image"
+    return None
+
+
 def texture_spec(context, job: Job, override: str | None) -> str:
     """The job's texture: a file on disk, or an image datablock's pixels saved as .npy in the job folder."""
     settings = context.scene.gt2gs
+    missing = None if override else texture_missing(settings)
+    if missing:
+        raise RunError(missing)
     if override or settings.texture_source == "FILE":
         chosen = override or settings.texture_path
-        if not chosen:
-            raise RunError("choose a texture file (or an image) first")
         path = os.path.abspath(bpy.path.abspath(chosen))
         if not os.path.isfile(path):
             raise RunError(f"texture file not found: {path}")
@@ -192,8 +203,6 @@ def texture_spec(context, job: Job, override: str | None) -> str:
             raise RunError(problem)
         return path
     image = settings.texture_image
-    if image is None:
-        raise RunError("choose a texture image")
     source = os.path.abspath(bpy.path.abspath(image.filepath_from_user())) if image.filepath else ""
     if source and os.path.isfile(source) and not image.is_dirty and image.packed_file is None:
         return source
@@ -370,7 +379,9 @@ class TransferRun:
             outcome = Outcome(CANCELLED, "cancelled; the scene is unchanged", seconds=seconds)
         else:
             outcome = Outcome(ERROR, status.error or "the transfer failed", seconds=seconds)
-        outcome.mode = self.result_mode
+        outcome.mode, outcome.source = self.result_mode, self.object_name
+        if status.state == DONE and self.result_mode == "NEW" and self.result_name:
+            outcome.message += f"; the original {self.object_name!r} is hidden (Alt+H shows it)"
         if ACTIVE.get(self.kind) is self:
             del ACTIVE[self.kind]
         OUTCOMES[self.kind] = outcome
@@ -397,6 +408,8 @@ def apply_result(context, object_name: str, path: str, mode: str):
         made.matrix_world = source.matrix_world.copy()
         for obj in context.view_layer.objects.selected:
             obj.select_set(False)
+        if context.view_layer.objects.get(source.name) is not None:
+            source.hide_set(True)  # the result takes its place on screen; Alt+H shows it again
         if made.visible_get():
             made.select_set(True)
         context.view_layer.objects.active = made

@@ -13,7 +13,7 @@ import bpy
 
 from ..blender import transfer_run
 from ..blender.job import DONE
-from .sidebar import CATEGORY
+from .sidebar import CATEGORY, text_lines, value_rows
 from .transfer_panel import current_view
 
 NO_RUN_TEXT = "No transfer yet: the outcome of the last one shows here"
@@ -37,26 +37,35 @@ def weights_text(report: dict[str, Any]) -> str:
     return f"{weights.get('spec', '?')}" + (f" ({os.path.basename(file)})" if file else "")
 
 
-def result_location(name: str | None, mode: str) -> str:
-    """Where the result of a run is: the object (new, or changed in place) and its collection."""
+def result_location(name: str | None, mode: str, source: str | None = None) -> str:
+    """Where the result of a run is: the object (new, beside the hidden ``source``, or changed in place) and its
+    collection."""
     if not name:
         return "-"
     obj = bpy.data.objects.get(name)
     if obj is None:
         return f"{name!r} (no longer in the file)"
     where = obj.users_collection[0].name if obj.users_collection else "no collection"
-    return f"{'changed in place' if mode == 'IN_PLACE' else 'new object'} {name!r} in {where!r}"
+    if mode == "IN_PLACE":
+        return f"changed in place {name!r} in {where!r}"
+    hidden = f"; the original {source!r} is hidden (Alt+H shows it)" if source else ""
+    return f"new object {name!r} in {where!r}{hidden}"
 
 
 def report_rows(
-    report: dict[str, Any] | None, result: str | None, seconds: float = 0.0, mode: str = "NEW"
+    report: dict[str, Any] | None,
+    result: str | None,
+    seconds: float = 0.0,
+    mode: str = "NEW",
+    source: str | None = None,
 ) -> list[tuple[str, str]]:
-    """(label, value) rows summarising a run's report; ``seconds``: what the user waited, worker start included."""
+    """(label, value) rows summarising a run's report; ``seconds``: what the user waited, worker start included;
+    ``source``: the object a new result was made from (hidden)."""
     if not report:
-        return [("Result", result_location(result, mode))] if result else []
+        return [("Result", result_location(result, mode, source))] if result else []
     width, height = report.get("image_size") or ("?", "?")
     rows = [
-        ("Result", result_location(result, mode)),
+        ("Result", result_location(result, mode, source)),
         ("Time", f"{seconds:.0f} s (texture transfer {report.get('seconds', 0.0):.0f} s)"),
         ("Splats", f"{report.get('n_gaussians', 0):,}"),
         ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
@@ -81,7 +90,7 @@ def result_view(last: transfer_run.Outcome | None, message: str, icon: str) -> R
     """The Result sub-panel for the last transfer's outcome, with the main panel's message and icon for it."""
     if last is None:
         return ResultView(NO_RUN_TEXT, "INFO")
-    rows = report_rows(last.report, last.result, last.seconds, last.mode) if last.state == DONE else []
+    rows = report_rows(last.report, last.result, last.seconds, last.mode, last.source) if last.state == DONE else []
     return ResultView(message, icon, rows)
 
 
@@ -95,12 +104,8 @@ class VIEW3D_PT_gt2gs_result(bpy.types.Panel):
     def draw(self, context):
         main = current_view(context)
         view = result_view(transfer_run.OUTCOMES.get("transfer"), main.message, main.icon)
-        self.layout.label(text=view.message, icon=view.icon)
-        column = self.layout.column(align=True)
-        for label, value in view.rows:
-            split = column.split(factor=0.4)
-            split.label(text=label)
-            split.label(text=value)
+        text_lines(self.layout, view.message, icon=view.icon)
+        value_rows(self.layout, view.rows)
 
 
 classes = (VIEW3D_PT_gt2gs_result,)

@@ -2,9 +2,12 @@
 
 ``SECTION_OF_PART`` is the one table from the settings' parts (``core/transfer/config.py``, which the
 command line groups by) to these sub-panels; a new setting shows in its part's sub-panel by itself, and
-a part the table does not know shows under Advanced. Each sub-panel draws its own front-end settings
-first, then every scene setting of its parts. Where a setting's 0 (or ``auto``) means "automatic", the value
-a run will actually use is shown under it (``effective_text``). ``draw`` only lays out what functions return.
+a part the table does not know shows under Advanced. ``FRONT`` names the few settings a sub-panel shows
+first, whatever their part (Texture: what an artist sets - the orientation, the repeats and how much of the
+scene to keep; the texture part's other settings are under Advanced). Each sub-panel draws its own front-end
+settings first, then every other scene setting of its parts. Where a setting's 0 (or ``auto``) means
+"automatic", the value a run will actually use is shown under it (``effective_text``). ``draw`` only lays out
+what functions return.
 """
 
 from __future__ import annotations
@@ -18,12 +21,12 @@ import bpy
 from ..blender import machine, textures, transfer_run, views
 from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
 from ..core.transfer.setting import IN_SCENE, PARTS
-from .sidebar import CATEGORY
+from .sidebar import CATEGORY, LABEL_CHARS, text_lines
 
 SECTIONS = ("Texture", "Views", "Quality", "Advanced")
 SECTION_OF_PART = {
-    "texture": "Texture",
-    "gt2": "Texture",
+    "texture": "Advanced",
+    "gt2": "Advanced",
     "views": "Views",
     "stylise": "Quality",
     "gpb": "Quality",
@@ -33,11 +36,12 @@ SECTION_OF_PART = {
 }
 """Which sub-panel shows the settings of each part of the method."""
 FRONT = {
-    "Texture": ("angle", "texture_repeats", "texture_height"),
+    "Texture": ("angle", "texture_repeats", "keep_scene"),
     "Views": ("n_views",),
     "Quality": ("lambda_content",),
 }
-"""Settings a sub-panel shows first, beside its own front-end properties (those the config has)."""
+"""Settings a sub-panel shows first, beside its own front-end properties (those the config has; ``keep_scene``
+shows once the config has it)."""
 OPEN = ("Texture", "Views")
 """Sub-panels open in a new file; the others start closed."""
 
@@ -68,11 +72,12 @@ def front_settings(section: str) -> list[str]:
 
 
 def section_settings(section: str) -> list[tuple[str, list[str]]]:
-    """(part, setting names) of the scene settings ``section`` lists after its front settings, in part order."""
-    front = front_settings(section)
+    """(part, setting names) of the scene settings ``section`` lists after its front settings, in part order
+    (a setting some sub-panel shows first is not listed again)."""
+    fronts = {name for shown in SECTIONS for name in front_settings(shown)}
     grouped: dict[str, list[str]] = {}
     for name, meta, _ in user_settings(IN_SCENE):
-        if section_of(meta.part) == section and name not in front:
+        if section_of(meta.part) == section and name not in fronts:
             grouped.setdefault(meta.part, []).append(name)
     return list(grouped.items())
 
@@ -116,15 +121,23 @@ def setting_used(owner: Any, name: str) -> bool:
 
 def draw_setting(layout, owner, name: str, info: dict[str, Any] | None) -> None:
     """A setting's property (greyed out when the run ignores it), with the value a run will use under it
-    when it is automatic."""
-    row = layout.row()
-    row.active = setting_used(owner, name)
-    row.prop(owner, name)
+    when it is automatic; a label too long for the label column gets the row's whole width (a checkbox) or a
+    row of its own above the value."""
+    column = layout.column()
+    column.active = setting_used(owner, name)
+    prop = owner.bl_rna.properties[name]
+    if len(prop.name) <= LABEL_CHARS:
+        column.prop(owner, name)
+    elif prop.type == "BOOLEAN":
+        row = column.row()
+        row.use_property_split = False
+        row.prop(owner, name)
+    else:
+        column.label(text=prop.name)
+        column.prop(owner, name, text="")
     text = effective_text(name, getattr(owner, name), info)
     if text:
-        split = layout.split(factor=0.4)
-        split.label(text="")
-        split.label(text=text, icon="INFO")
+        text_lines(layout, text, icon="INFO")
 
 
 def _draw_texture_front(layout, context) -> None:
@@ -183,9 +196,10 @@ def section_panel(section: str) -> type:
         info = {**(machine.current().info or {}), "front": views.views_from_front(context.scene.gt2gs, context.scene)}
         for part, names in groups:
             column = layout.column()
-            if front is not None or len(groups) > 1:
+            heading = PARTS.get(part, part.title())
+            if len(groups) > 1 or (front is not None and heading != section):  # no "Views" inside Views
                 column.separator()
-                column.label(text=PARTS.get(part, part.title()))
+                column.label(text=heading)
             for name in names:
                 draw_setting(column, context.scene.gt2gs, name, info)
 

@@ -69,6 +69,7 @@ FRONT_END = {
     ),
     "texture_source": EnumProperty(
         name="Texture",
+        description="Where the texture comes from: a file on disk or an image of this Blender file",
         default="FILE",
         items=(("FILE", "File", "A texture photograph on disk"), ("IMAGE", "Image", "An image datablock of this file")),
     ),
@@ -80,6 +81,7 @@ FRONT_END = {
     ),
     "view_source": EnumProperty(
         name="Views",
+        description="The views the transfer looks at the object from (consecutive views should be neighbours)",
         default="AUTO",
         items=(
             ("AUTO", "Automatic", "Views generated around the object"),
@@ -88,7 +90,11 @@ FRONT_END = {
             ("CAMERAS_JSON", "cameras.json", "The cameras.json written by the 3DGS trainer"),
         ),
     ),
-    "camera_collection": PointerProperty(name="Camera Collection", type=bpy.types.Collection),
+    "camera_collection": PointerProperty(
+        name="Camera Collection",
+        type=bpy.types.Collection,
+        description="The collection whose cameras are the views, in the order of their names",
+    ),
     "cameras_json": StringProperty(
         name="cameras.json",
         subtype="FILE_PATH",
@@ -108,9 +114,15 @@ FRONT_END = {
     ),
     "result_mode": EnumProperty(
         name="Result",
+        description="Where the re-textured splats go",
         default="NEW",
         items=(
-            ("NEW", "New Object", "Add the re-textured splats as a new object beside the original"),
+            (
+                "NEW",
+                "New Object",
+                "Add the re-textured splats as a new object in the original's place; the original "
+                "is hidden (Alt+H shows it)",
+            ),
             ("IN_PLACE", "In Place", "Replace the object's splats (undoable)"),
         ),
     ),

@@ -6,6 +6,7 @@ What the panel shows comes from ``splat_rows`` (tested without a UI); ``draw`` o
 from __future__ import annotations
 
 import os
+import textwrap
 
 import bpy
 
@@ -13,6 +14,32 @@ from ..blender import splats
 
 CATEGORY = "GT²"
 NO_SPLAT_TEXT = "Select a Gaussian splat object"
+LABEL_CHARS = 14
+"""The longest label that fits a property's label column at Blender's default sidebar width and UI scale (a
+5.2 window cut "Split Splats Ab…" and "Texture Rotati…" at 15); a longer one gets a row of its own."""
+VALUE_CHARS = 20
+"""The longest value that fits beside its label (the label takes 40 % of the row)."""
+LINE_CHARS = 34
+"""The longest text that fits across the default sidebar (Blender does not wrap labels)."""
+
+
+def text_lines(layout, text: str, icon: str = "NONE") -> None:
+    """``text`` as labels of at most ``LINE_CHARS`` characters across the panel, the icon on the first."""
+    for i, line in enumerate(textwrap.wrap(text, LINE_CHARS) or [""]):
+        layout.label(text=line, icon=icon if i == 0 else "BLANK1")
+
+
+def value_rows(layout, rows: list[tuple[str, str]]) -> None:
+    """(label, value) rows: side by side when the value fits, else the value on its own lines under the label."""
+    column = layout.column(align=True)
+    for label, value in rows:
+        if len(value) <= VALUE_CHARS and len(label) <= LABEL_CHARS:
+            split = column.split(factor=0.4)
+            split.label(text=label)
+            split.label(text=value)
+        else:
+            column.label(text=label)
+            text_lines(column, value, icon="BLANK1")
 
 
 def splat_rows(obj) -> list[tuple[str, str]] | None:
@@ -44,11 +71,7 @@ class VIEW3D_PT_gt2gs_splat(bpy.types.Panel):
         if rows is None:
             layout.label(text=NO_SPLAT_TEXT, icon="INFO")
         else:
-            column = layout.column(align=True)
-            for label, value in rows:
-                split = column.split(factor=0.4)
-                split.label(text=label)
-                split.label(text=value)
+            value_rows(layout, rows)
         row = layout.row(align=True)
         row.operator("gt2gs.import_ply", text="Import", icon="IMPORT")
         row.operator("gt2gs.export_ply", text="Export", icon="EXPORT")

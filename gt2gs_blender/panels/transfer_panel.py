@@ -16,7 +16,8 @@ import bpy
 from ..blender import machine, transfer_run
 from ..blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
 from ..blender.transfer_run import progress_text
-from .sidebar import CATEGORY
+from .sections import draw_setting
+from .sidebar import CATEGORY, text_lines
 
 FALLBACK_WARNING = (
     "no VGG weights were found, so a random network stood in and the result is not the method's: set Weights in "
@@ -52,8 +53,8 @@ def transfer_view(
     warnings: Sequence[str] = (),
 ) -> TransferView:
     """What the panel shows for a target object name (None: no splat selected), the running job's status
-    (None: none runs), the outcome of the last run, why a transfer cannot run here (``blocker``, e.g. a
-    GPU-only preset without CUDA) and warnings about the machine (e.g. no weights)."""
+    (None: none runs), the outcome of the last run, why a transfer cannot run now (``blocker``: no texture
+    chosen, a GPU-only preset without CUDA) and warnings about the machine (e.g. no weights)."""
     shown = [*warnings, *([blocker[:1].upper() + blocker[1:]] if blocker else [])]
     if running is not None:
         text = progress_text(running)
@@ -62,7 +63,7 @@ def transfer_view(
         )
     can = target is not None and blocker is None
     if last is None:
-        message = f"Ready: {target}" if target is not None else "Select a Gaussian splat object"
+        message = "Select a Gaussian splat object" if target is None else f"{'Ready' if can else 'Not ready'}: {target}"
         return TransferView(IDLE, can, False, message, ICONS[IDLE], warnings=shown)
     message = {
         DONE: last.message[:1].upper() + last.message[1:],
@@ -96,7 +97,8 @@ def current_view(context) -> TransferView:
         target.name if target else None,
         run.job.status if run else None,
         transfer_run.OUTCOMES.get("transfer"),
-        blocker=machine.gpu_problem(context.scene.gt2gs.preset, device, state),
+        blocker=transfer_run.texture_missing(context.scene.gt2gs)
+        or machine.gpu_problem(context.scene.gt2gs.preset, device, state),
         warnings=machine_warnings(state),
     )
 
@@ -115,10 +117,12 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
         view = current_view(context)
         layout.prop(settings, "target")
         layout.prop(settings, "preset")
-        layout.prop(settings, "result_mode", expand=True)
-        layout.prop(settings, "region_only")
+        row = layout.row()
+        row.use_property_split = False  # the two choices across the panel: "New Object" was cut in the split
+        row.prop(settings, "result_mode", expand=True)
+        draw_setting(layout, settings, "region_only", None)
         for warning in view.warnings:
-            layout.box().label(text=warning, icon="ERROR")
+            text_lines(layout.box(), warning, icon="ERROR")
         row = layout.row(align=True)
         row.scale_y = 1.4
         row.enabled = view.can_transfer
@@ -127,7 +131,7 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
             layout.operator("gt2gs.cancel_transfer", icon="CANCEL")
         if view.progress is not None:
             layout.progress(factor=view.progress, type="BAR", text=view.progress_text)
-        layout.label(text=view.message, icon=view.icon)
+        text_lines(layout, view.message, icon=view.icon)
 
 
 classes = (VIEW3D_PT_gt2gs_transfer,)

@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
-torch = pytest.importorskip("torch", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.blender import display
 from gt2gs_blender.blender import views as views_edge
@@ -116,6 +115,7 @@ def _check_setup(scene):
 def test_solid_mode_shows_the_splats_mean_colour(fresh, donut, tmp_path):
     """Workbench (Solid mode's renderer) after setup_scene: each splat object in its opacity-weighted mean colour
     (it cannot read per-splat colours from generated quads), the rasterizer's mean over the object within 0.03."""
+    pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the rasterizer oracle needs torch")
     views, reference, alpha = _reference(donut)
     import_file(donut)
     scene = bpy.context.scene
@@ -143,6 +143,8 @@ def _values(obj, name):
 
 def _reference(donut):
     """(views, rasterizer colours (B,H,W,3) over white, alphas (B,H,W)) for two generated views."""
+    import torch
+
     from gt2gs_blender.core.cameras.generate import auto_views
     from gt2gs_blender.core.render import render
     from gt2gs_blender.core.scene.files import read_scene
@@ -175,6 +177,8 @@ def _read_png(path):
 
 def object_ssim(image, reference, alpha):
     """Mean SSIM over the windows centred on object pixels (rasterizer alpha > 0.5)."""
+    import torch
+
     from gt2gs_blender.core.transfer.metrics import masked_ssim
 
     return masked_ssim(torch.from_numpy(image), torch.from_numpy(reference), torch.from_numpy(alpha > 0.5))
@@ -199,6 +203,7 @@ def _render_views(engine, views, folder, filter_px):
 @pytest.mark.slow
 @pytest.mark.parametrize("engine", ["BLENDER_EEVEE", "CYCLES"])
 def test_renders_match_the_rasterizer(fresh, donut, tmp_path, engine):
+    pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the rasterizer oracle needs torch")
     views, reference, alpha = _reference(donut)
     for i, ref in enumerate(reference):  # the oracle beside the renders, for a look
         path = tmp_path / f"rasterizer_view{i}.png"

@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
+pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the scenes and the path rules are the engine's")
 
 from gt2gs_blender.app.cli.demo import torus_scene
 from gt2gs_blender.core.scene.files import read_splats, write_splats

@@ -50,6 +50,23 @@ def built_zip(tmp_path_factory) -> Path:
     return zip_path
 
 
+def test_the_readme_build_works_on_a_fresh_clone(tmp_path):
+    """`make build` (the README's command) in a copy of the tree without dist/ (the issue's fresh clone), on
+    this bpy's Python: it makes the folder Blender's tool refuses to do without."""
+    for name in ("Makefile", "requirements.txt", "requirements-py313.txt"):
+        (tmp_path / name).write_bytes((ROOT / name).read_bytes())
+    (tmp_path / "gt2gs_blender").symlink_to(SOURCE, target_is_directory=True)
+    result = subprocess.run(
+        ["make", "-s", "build", "STAMP=", f"PY={sys.executable}"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=180,
+    )
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert [p.name for p in (tmp_path / "dist").iterdir()] == ["gt2gs_blender-0.1.0.zip"]
+
+
 def test_build_ships_the_package_and_nothing_else(built_zip):
     names = zipfile.ZipFile(built_zip).namelist()
     assert built_zip.name == "gt2gs_blender-0.1.0.zip"

@@ -18,11 +18,9 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
-torch = pytest.importorskip("torch", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.blender import splats, transform
-from gt2gs_blender.core.render.sh import eval_sh, sh_basis
-from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
+from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 
 from .conftest import DONUT_COUNT
@@ -184,7 +182,15 @@ def euler_xyz(rx: float, ry: float, rz: float) -> np.ndarray:
     return rot_z @ rot_y @ rot_x
 
 
+def torch_oracle():
+    """torch, for the tests whose oracle is the engine's torch side (skipped on a bpy whose Python has none here)."""
+    return pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="this oracle is the engine's torch side")
+
+
 def rotmats(quats: np.ndarray) -> np.ndarray:
+    torch = torch_oracle()
+    from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
+
     return quats_to_rotmats(torch.from_numpy(quats.astype(np.float64))).numpy()
 
 
@@ -306,16 +312,14 @@ def test_sh3_scene_with_normals_and_extras_round_trips(fresh, tmp_path, fmt):
     props, columns = sh3_columns(300, seed=1)
     src = tmp_path / f"src_{fmt}.ply"
     if fmt == "ascii":  # ASCII number formatting is the writer's: let core write the source
-        scene = GaussianScene(
-            means=torch.from_numpy(np.stack([columns[c] for c in "xyz"], 1)),
-            quats=torch.from_numpy(np.stack([columns[f"rot_{i}"] for i in range(4)], 1)),
-            log_scales=torch.from_numpy(np.stack([columns[f"scale_{i}"] for i in range(3)], 1)),
-            opacity_logits=torch.from_numpy(columns["opacity"]),
-            sh_dc=torch.from_numpy(np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1)),
-            sh_rest=torch.from_numpy(
-                np.ascontiguousarray(
-                    np.stack([columns[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
-                )
+        scene = SplatArrays(
+            means=np.stack([columns[c] for c in "xyz"], 1),
+            quats=np.stack([columns[f"rot_{i}"] for i in range(4)], 1),
+            log_scales=np.stack([columns[f"scale_{i}"] for i in range(3)], 1),
+            opacity_logits=columns["opacity"],
+            sh_dc=np.stack([columns[f"f_dc_{i}"] for i in range(3)], 1),
+            sh_rest=np.ascontiguousarray(
+                np.stack([columns[f"f_rest_{i}"] for i in range(45)], 1).reshape(-1, 3, 15).transpose(0, 2, 1)
             ),
             extras={name: columns[name] for name, _ in EXTRAS},
             ply_layout=tuple(props),
@@ -376,6 +380,9 @@ def test_export_needs_a_splat_object(fresh, tmp_path):
 
 
 def test_export_bakes_translation_rotation_and_uniform_scale(fresh, tmp_path):
+    torch = torch_oracle()
+    from gt2gs_blender.core.render.sh import eval_sh
+
     props, columns = sh3_columns(400, seed=2)
     src = tmp_path / "src.ply"
     write_ply_numpy(src, props, columns, "binary_little_endian")
@@ -442,6 +449,9 @@ def test_export_bakes_translation_rotation_and_uniform_scale(fresh, tmp_path):
 
 @pytest.mark.parametrize("scale", [(1.0, 2.0, 0.5), (-1.0, 1.0, 1.0)], ids=["non-uniform", "mirror"])
 def test_baking_a_non_similarity_keeps_covariances_exact(fresh, tmp_path, scale):
+    torch = torch_oracle()
+    from gt2gs_blender.core.render.sh import eval_sh
+
     props, columns = sh3_columns(200, seed=4)
     src = tmp_path / "src.ply"
     write_ply_numpy(src, props, columns, "binary_little_endian")
@@ -494,6 +504,9 @@ def test_singular_transform_is_refused(fresh, donut, tmp_path):
 
 
 def test_transform_sh_basis_matches_the_rasterizer():
+    torch = torch_oracle()
+    from gt2gs_blender.core.render.sh import sh_basis
+
     dirs = np.random.default_rng(5).standard_normal((50, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     np.testing.assert_allclose(transform.sh_basis(dirs, 3), sh_basis(torch.from_numpy(dirs), 3).numpy(), atol=1e-12)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import glob
+import importlib.util
 import json
 import math
 import os
@@ -24,16 +25,14 @@ bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 from gt2gs_blender.app import deps
 from gt2gs_blender.app.images import write_png
 from gt2gs_blender.blender import machine, splats, transfer_run, views
-from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus
+from gt2gs_blender.blender.job import CANCELLED, DONE, ERROR, IDLE, RUNNING, JobStatus, worker_python
 from gt2gs_blender.blender.transfer_run import eta_text
-from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
 from gt2gs_blender.core.errors import MEMORY_ADVICE
 from gt2gs_blender.core.scene.ply_write import write_ply
 from gt2gs_blender.panels.result import NO_RUN_TEXT, result_view
 from gt2gs_blender.panels.transfer_panel import NO_WEIGHTS_WARNING, machine_warnings, transfer_view
 
-from ..test_transfer import blob_scene, stripes
-from ..test_worker import OUT_OF_MEMORY, address_space_cap, colours_differ, needs_prlimit
+from ..worker_tools import OUT_OF_MEMORY, address_space_cap, blob_splats, colours_differ, needs_prlimit, stripes
 from .conftest import SHARED
 
 pytestmark = pytest.mark.blender
@@ -45,7 +44,7 @@ TEXTURES = sorted(glob.glob(str(SHARED / "data" / "textures" / "*.jpg")))
 def inputs(tmp_path) -> dict[str, Path]:
     """A small splat scene and a stripe texture on disk."""
     ply, texture = tmp_path / "blob.ply", tmp_path / "stripes.png"
-    write_ply(ply, blob_scene(600))
+    write_ply(ply, blob_splats(600))
     write_png(texture, (stripes() * 255).astype(np.uint8))
     return {"ply": ply, "texture": texture}
 
@@ -127,7 +126,11 @@ def test_transfer_operator_headless_adds_a_new_object(blob, capfd):
     outcome = transfer_run.OUTCOMES["transfer"]
     view = transfer_view(blob.name, None, outcome)
     rows = dict(result_view(outcome, view.message, view.icon).rows)
-    assert view.state == DONE and rows["Result"] == "new object 'blob GT²' in 'Scene Collection'"
+    assert view.state == DONE and rows["Result"] == (
+        "new object 'blob GT²' in 'Scene Collection'; the original 'blob' is hidden (Alt+H shows it)"
+    )
+    assert blob.hide_get() and result.visible_get()  # the result takes the original's place on screen
+    assert re.fullmatch(r"Done in \d+ s; the original 'blob' is hidden \(Alt\+H shows it\)", view.message)
 
 
 def test_transfer_in_place_replaces_the_splats(blob):
@@ -273,7 +276,16 @@ def test_image_datablock_texture_goes_as_pixels(blob):
         job.cleanup()
 
 
+def engine_cameras():
+    """The engine's cameras.json reader; its Camera is torch's (skipped on a bpy whose Python has no torch here)."""
+    pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the engine's Camera needs torch")
+    from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
+
+    return load_cameras_json
+
+
 def test_scene_cameras_become_views_in_object_space(fresh):
+    load_cameras_json = engine_cameras()
     scene = fresh.context.scene
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 640, 480, 50
     cam_data = fresh.data.cameras.new("cam")
@@ -297,6 +309,7 @@ def test_scene_cameras_become_views_in_object_space(fresh):
 
 def test_a_core_camera_becomes_a_blender_camera_that_sees_the_same(fresh):
     """add_camera then camera_entries gives back the core camera: same size, focal length and projection."""
+    load_cameras_json = engine_cameras()
     from gt2gs_blender.core.cameras.generate import look_at
 
     scene = fresh.context.scene
@@ -400,7 +413,7 @@ def test_transfer_view_in_each_state():
     assert eta_text(None) == "" and eta_text(5) == "ETA 0:05"
 
 
-def test_preferences_install_command_and_status(fresh):
+def test_preferences_install_command_and_status(fresh, monkeypatch):
     from gt2gs_blender.operators.dependencies import GT2GS_OT_install_dependencies, install_commands
     from gt2gs_blender.panels.preferences import GT2GS_AP_preferences, dependency_rows
 
@@ -408,9 +421,31 @@ def test_preferences_install_command_and_status(fresh):
     commands = install_commands("CUDA", "/user/extensions/.user/gt2gs_blender/deps")
     assert commands[-1] == deps.install_command(sys.executable, "/user/extensions/.user/gt2gs_blender/deps", "CUDA")
     assert all(command[0] == sys.executable for command in commands)
+    pinned = deps.PINS_BY_PYTHON[sys.version_info[:2]]  # this Blender's Python has pins: 3.11 or 3.13
+    assert {f"{name}=={version}" for name, version in pinned.items()} <= set(commands[-1])
     assert not GT2GS_OT_install_dependencies.poll(fresh.context)  # offline here, and not an installed extension
-    rows = {module: ok for module, _, ok in dependency_rows(None)}
+    monkeypatch.setattr(machine, "_state", machine.MachineState())
+    before = {module: ok for module, _, ok in dependency_rows(None, machine.current())}
+    assert before == {m: importlib.util.find_spec(m) is not None for m in ("torch", "numpy", "cv2")}
+    machine.probe({}, None)  # imports them in the worker's Python (this one, or GT2GS_WORKER_PYTHON's)
+    rows = {module: ok for module, _, ok in dependency_rows(None, machine.current())}
     assert rows == {"torch": True, "numpy": True, "cv2": True}
+
+
+def test_packages_built_for_another_python_are_shown_as_not_loading(fresh, monkeypatch):
+    """The deps folder holds packages built for another Python (the issue's 5.2 window showed them as installed):
+    the machine check imports them in the worker's Python, and the preferences say which do not load and why."""
+    from gt2gs_blender.panels.preferences import dependency_rows, machine_rows
+
+    if worker_python() == sys.executable:
+        pytest.skip("needs a worker Python other than this one (GT2GS_WORKER_PYTHON, as make test-blender52 sets)")
+    this_pythons_packages = str(Path(np.__file__).parents[1])  # numpy built for this Python, not the worker's
+    monkeypatch.setattr(machine, "_state", machine.MachineState())
+    info, error = machine.probe({}, this_pythons_packages)
+    assert info is None and re.search(r"numpy does not load: \w*Error: .*_multiarray_umath", error), error
+    rows = {module: (found, ok) for module, found, ok in dependency_rows(this_pythons_packages, machine.current())}
+    assert rows["numpy"][0].startswith("does not load: ") and not rows["numpy"][1]
+    assert machine_rows(machine.current()) == [("Machine", error, "ERROR")]
 
 
 def test_batch_script_runs_and_fails_readably(fresh, inputs, tmp_path, capsys):
@@ -517,7 +552,11 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
     listed = [name for s in sections.SECTIONS for _, names in sections.section_settings(s) for name in names]
     listed += [name for section in sections.SECTIONS for name in sections.front_settings(section)]
     assert sorted(listed) == sorted(name for name, _, _ in user_settings(IN_SCENE))  # each exactly once
-    assert {"texture", "gt2"} == set(dict(sections.section_settings("Texture")))  # by part: new ones join
+    # Texture: what an artist sets (Keep Scene once the config has it); the method's texture settings: Advanced
+    keep = [name for name, _, _ in user_settings(IN_SCENE) if name == "keep_scene"]
+    assert sections.front_settings("Texture") == ["angle", "texture_repeats", *keep]
+    assert sections.section_settings("Texture") == []
+    assert {"texture", "gt2"} <= set(dict(sections.section_settings("Advanced")))  # by part: new ones join
     labels = [cls.bl_label for cls in sections.classes]
     assert labels == ["Texture", "Views", "Quality", "Advanced"]
     assert all(hasattr(fresh.types, cls.__name__) for cls in sections.classes)
@@ -672,6 +711,7 @@ def test_machine_check_runs_in_the_workers_python(fresh, tmp_path, monkeypatch):
 
 
 def test_first_compile_of_the_kernel_is_a_progress_stage(monkeypatch):
+    pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the worker runs here, in this Python")
     from gt2gs_blender.app import worker
     from gt2gs_blender.core.render import cpu_backend, kernel_cache
     from gt2gs_blender.core.transfer.presets import preset
@@ -748,15 +788,43 @@ def draw_panel(cls, context) -> list:
 
 
 def test_every_panel_draws_what_its_functions_say(blob):
+    from gt2gs_blender.core.transfer.config import user_settings
+    from gt2gs_blender.core.transfer.setting import IN_SCENE
     from gt2gs_blender.panels import result, sections, transfer_panel
+    from gt2gs_blender.panels.sidebar import LABEL_CHARS, LINE_CHARS
 
     context = bpy.context
     main = draw_panel(transfer_panel.VIEW3D_PT_gt2gs_transfer, context)
     assert "gt2gs.transfer_texture" in main and transfer_panel.current_view(context).message in main
     texture = draw_panel(sections.classes[0], context)
-    assert texture[:2] == ["texture_source", "texture_path"] and "angle" in texture and "n_angles" in texture
+    assert texture[:2] == ["texture_source", "texture_path"] and "angle" in texture and "texture_repeats" in texture
+    assert "n_angles" not in texture and "Texture" not in texture  # no heading repeating the sub-panel's name
     views_shown = draw_panel(sections.classes[1], context)
-    assert views_shown[:2] == ["view_source", "n_views"]
+    assert views_shown[:2] == ["view_source", "n_views"] and "Views" not in views_shown
     advanced = draw_panel(sections.classes[3], context)
-    assert "dedup_threshold" in advanced and "Uses every texture bank entry kept" in advanced
-    assert draw_panel(result.VIEW3D_PT_gt2gs_result, context) == [result.NO_RUN_TEXT]
+    assert "dedup_threshold" in advanced and "n_angles" in advanced
+    assert "Uses every texture bank entry kept" in advanced
+    # labels longer than the default sidebar's label column get a row of their own (or the whole row: a checkbox)
+    labels = {name: meta.label for name, meta, kind in user_settings(IN_SCENE) if kind is not bool}
+    long = [name for name in advanced if len(labels.get(name, "")) > LABEL_CHARS]
+    assert long and all(advanced[advanced.index(name) - 1] == labels[name] for name in long)
+    assert all(len(text) <= LINE_CHARS for text in advanced if text.startswith("Uses "))
+    assert " ".join(draw_panel(result.VIEW3D_PT_gt2gs_result, context)) == result.NO_RUN_TEXT  # across the panel
+    context.scene.gt2gs.texture_path = ""  # no texture: Transfer disabled, and the panel says why
+    view = transfer_panel.current_view(context)
+    assert not view.can_transfer and view.message == "Not ready: blob"
+    assert view.warnings == ["Choose a texture file (or an image) first"]
+    assert "Choose a texture file (or an" in draw_panel(transfer_panel.VIEW3D_PT_gt2gs_transfer, context)
+
+
+def test_every_choice_and_number_reads_well(fresh):
+    """Every menu item has a tooltip, and numbers show 2 or 3 decimals (not 1.5000, 12.0000)."""
+    from gt2gs_blender.panels.preferences import GT2GS_AP_preferences
+
+    owners = (fresh.context.scene.gt2gs.bl_rna, GT2GS_AP_preferences.bl_rna)
+    for prop in (p for owner in owners for p in owner.properties if not p.identifier.startswith(("rna_", "bl_"))):
+        assert prop.description, prop.identifier
+        if prop.type == "ENUM":
+            assert all(item.description for item in prop.enum_items), prop.identifier
+        if prop.type == "FLOAT":
+            assert prop.precision in (2, 3), (prop.identifier, prop.precision)
