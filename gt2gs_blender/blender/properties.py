@@ -63,6 +63,7 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
         "auto": "The fastest available",
         "torch": "Portable torch rasterizer: runs anywhere, slower",
         "cpu": "Compiled CPU kernel (built once, at the first run)",
+        "numba": "The CPU kernel compiled by numba, where there is no C++ compiler",
         "gsplat": "gsplat's CUDA kernels (NVIDIA GPU)",
     },
 }

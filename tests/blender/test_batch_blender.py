@@ -11,10 +11,10 @@ import pytest
 pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 
 from gt2gs_blender.app.images import write_png
-from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.ply import read_ply_arrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 
-from ..test_transfer import blob_scene, stripes
+from ..worker_tools import blob_splats, stripes
 
 pytestmark = pytest.mark.blender
 
@@ -25,7 +25,7 @@ SMALL = "preview,2,6,48,4"
 def test_the_batch_script_runs_a_manifest(fresh, tmp_path, capsys):
     from gt2gs_blender import batch
 
-    write_ply(tmp_path / "blob.ply", blob_scene(600))
+    write_ply(tmp_path / "blob.ply", blob_splats(600))
     write_png(tmp_path / "stripes.png", (stripes() * 255).astype(np.uint8))
     (tmp_path / "bad.png").write_bytes(b"not an image")
     manifest = tmp_path / "jobs.csv"
@@ -40,7 +40,7 @@ def test_the_batch_script_runs_a_manifest(fresh, tmp_path, capsys):
     for name in ("blob-stripes-angle0", "blob-stripes-angle90"):
         report = json.loads((out / name / "report.json").read_text())
         assert report["batch"]["job"] == name and len(report["batch"]["settings_hash"]) == 64
-        assert len(read_ply(out / name / f"{name}.ply")) == report["n_gaussians"]
+        assert len(read_ply_arrays(out / name / f"{name}.ply")) == report["n_gaussians"]
         assert report["config"]["n_views"] == 2 and report["config"]["stylise_steps"] == 6
     assert json.loads((out / "blob-stripes-angle90" / "report.json").read_text())["config"]["angle"] == 90.0
     assert not (out / "blob-bad-angle0").exists()
