@@ -15,6 +15,7 @@ from .progress import Cancelled, Progress
 from .render import render
 from .scene.files import FORMATS, read_scene, read_splats, write_splats
 from .scene.gaussians import GaussianScene
+from .scene.parts import Parts, find_parts
 from .scene.ply import read_ply
 from .scene.ply_write import write_ply
 from .transfer.config import TransferConfig
@@ -28,10 +29,12 @@ __all__ = [
     "Cancelled",
     "GT2GSError",
     "GaussianScene",
+    "Parts",
     "Progress",
     "TransferConfig",
     "TransferResult",
     "auto_views",
+    "find_parts",
     "load_views",
     "preset",
     "read_ply",

@@ -23,6 +23,7 @@ from .convert import add_convert_command
 from .demo import add_demo_command
 from .fit import add_fit_command
 from .info import add_info_command
+from .parts import add_parts_command
 from .render import add_render_command
 
 PROG = "gt2gs"
@@ -69,6 +70,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="print the traceback of errors")
     commands = parser.add_subparsers(title="commands", metavar="COMMAND", required=True)
     add_info_command(commands, debug)
+    add_parts_command(commands, debug)
     add_render_command(commands, debug)
     add_demo_command(commands, debug)
     add_fit_command(commands, debug)

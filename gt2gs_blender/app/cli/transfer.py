@@ -15,6 +15,7 @@ from ..jobs import load_region, read_texture, run_transfer, summary, write_befor
 from ..progress import TerminalProgress
 from .args import render_options, scene_input, scene_options
 from .options import add_setting_arguments, config_from_args
+from .parts import part_region
 
 
 def add_view_arguments(p: argparse.ArgumentParser) -> None:
@@ -83,6 +84,8 @@ def _transfer(args: argparse.Namespace) -> dict:
     scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
     texture = read_texture(args.texture)  # inputs are checked before any work starts
     region = load_region(args.region, len(scene)) if args.region is not None else None
+    if args.part is not None:
+        region = part_region(scene, args.part, args.scene)
     views, config = _views(args), config_from_args(args)
     with TerminalProgress("transfer") as bar:
         result = run_transfer(
@@ -125,11 +128,19 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     add_setting_arguments(p, given=GIVEN)
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
     p.add_argument("--strip", type=Path, metavar="PNG", help="also write a before/after picture")
-    p.add_argument(
+    only = p.add_mutually_exclusive_group()
+    only.add_argument(
         "--region",
         type=Path,
         metavar="MASK.npy",
         help="restyle only these Gaussians (.npy of indices or booleans); the rest stay bit-identical",
+    )
+    only.add_argument(
+        "--part",
+        type=int,
+        metavar="N",
+        help="restyle only part N of the scene (see the parts command: found from the splats' colour and "
+        "position, 0 the largest); the rest stay bit-identical",
     )
     p.set_defaults(run=cmd_transfer)
 
