@@ -2,12 +2,19 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
 import numpy as np
 import pytest
 import torch
 
 from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.scene.parts import MIN_SHARE, find_parts
+from gt2gs_blender.core.scene.parts import MIN_SHARE, find_parts, srgb_to_lab
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def box(rng: np.random.Generator, lo: list[float], hi: list[float], rgb: list[float], n: int) -> tuple[np.ndarray, ...]:
@@ -90,3 +97,41 @@ def test_the_command_line_lists_parts_and_restyles_one(tmp_path, capsys) -> None
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and str(path) in err[0] and "parts 0 to 1" in err[0]
     assert not (tmp_path / "out.ply").exists()
+
+
+def test_lab_is_opencvs() -> None:
+    """The numpy sRGB to CIE Lab agrees with OpenCV's float ``COLOR_RGB2Lab`` (whose gamma is a table: within a
+    Lab unit, a fifth of a just-noticeable difference), black and white exactly."""
+    rgb = np.random.default_rng(3).uniform(0.0, 1.0, size=(20000, 3)).astype(np.float32)
+    rgb[:2] = [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]
+    reference = cv2.cvtColor(rgb.reshape(-1, 1, 3), cv2.COLOR_RGB2Lab).reshape(-1, 3)
+    lab = srgb_to_lab(rgb)
+    assert np.abs(lab - reference).max() < 1.0 and np.abs(lab - reference).mean() < 0.1
+    np.testing.assert_allclose(lab[:2], [[0.0, 0.0, 0.0], [100.0, 0.0, 0.0]], atol=0.01)
+
+
+def test_blender_finds_the_same_parts_without_torch_or_opencv(tmp_path) -> None:
+    """Blender's Python has neither: ``find_parts_in`` on a file's numpy arrays, in a process where both are
+    blocked, labels the splats as ``find_parts`` does on the same file's torch scene."""
+    from gt2gs_blender.core.api import read_scene, write_ply
+
+    rng = np.random.default_rng(0)
+    scene = scene_of(
+        box(rng, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.85, 0.7, 0.4], 1500),
+        box(rng, [0.0, 0.0, -0.5], [1.0, 1.0, 0.0], [0.08, 0.08, 0.1], 700),
+        box(rng, [1.0, 0.0, 0.0], [1.5, 1.0, 1.0], [0.2, 0.5, 0.9], 600),
+    )
+    path, labels = tmp_path / "three.ply", tmp_path / "labels.npy"
+    write_ply(path, scene)
+    code = (
+        "import sys; sys.modules['torch'] = sys.modules['cv2'] = None\n"
+        "import numpy as np\n"
+        "from gt2gs_blender.core.scene.parts import find_parts_in\n"
+        "from gt2gs_blender.core.scene.ply import read_ply_arrays\n"
+        f"np.save({str(labels)!r}, find_parts_in(read_ply_arrays({str(path)!r})).labels)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    expected = find_parts(read_scene(path)).labels
+    assert len(np.unique(expected)) == 3
+    np.testing.assert_array_equal(np.load(labels), expected)

@@ -15,7 +15,7 @@ from .progress import Cancelled, Progress
 from .render import render
 from .scene.files import FORMATS, read_scene, read_splats, write_splats
 from .scene.gaussians import GaussianScene
-from .scene.parts import Parts, find_parts
+from .scene.parts import Parts, find_parts, find_parts_in
 from .scene.ply import read_ply
 from .scene.ply_write import write_ply
 from .transfer.config import TransferConfig
@@ -35,6 +35,7 @@ __all__ = [
     "TransferResult",
     "auto_views",
     "find_parts",
+    "find_parts_in",
     "load_views",
     "preset",
     "read_ply",

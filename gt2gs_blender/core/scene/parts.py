@@ -8,16 +8,22 @@ either's largest inner edge plus ``SCALE`` over its size, so a colour boundary s
 not. Groups under ``MIN_SHARE`` of the splats then join the neighbour they touch most cheaply, or, touching none
 (floaters), the part of the nearest cell. Each splat finally takes the part nearest its own colour among those of
 its cell and the neighbouring ones (so a boundary runs between splats, not cells); parts are numbered largest first.
+
+numpy only (no torch, no OpenCV), so Blender finds the parts of a splat object in its own Python (``find_parts_in``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
-from .gaussians import GaussianScene
+from .arrays import SplatArrays
+from .inria import SH_C0
+
+if TYPE_CHECKING:
+    from .gaussians import GaussianScene
 
 GRIDS = (48, 32, 24, 16, 12, 8)
 """Cells along the scene's longest side: the finest at which an occupied cell holds ``PER_CELL`` splats on average
@@ -37,6 +43,10 @@ MIN_OPACITY = 0.1
 """Fainter splats do not vote for their cell's colour (they still take its part)."""
 BOUNDS_QUANTILE = 0.005
 """The grid spans the splats but this share on each side."""
+SRGB_TO_XYZ = np.array([[0.412453, 0.357580, 0.180423], [0.212671, 0.715160, 0.072169], [0.019334, 0.119193, 0.950227]])
+"""Linear sRGB to CIE XYZ under D65 (OpenCV's ``COLOR_RGB2Lab`` matrix)."""
+WHITE = np.array([0.950456, 1.0, 1.088754])
+"""D65's XYZ, Lab's reference white."""
 
 
 @dataclass(frozen=True)
@@ -62,14 +72,30 @@ class Parts:
 
 def find_parts(scene: GaussianScene, scale: float = SCALE) -> Parts:
     """The parts of ``scene`` (see the module's docstring); one part for a scene of one colour."""
-    means = scene.means.detach().double().cpu().numpy()
+    return _parts(
+        scene.means.detach().double().cpu().numpy(),
+        scene.base_colors.detach().float().cpu().numpy(),
+        scene.opacities.detach().float().cpu().numpy(),
+        scale,
+    )
+
+
+def find_parts_in(scene: SplatArrays, scale: float = SCALE) -> Parts:
+    """``find_parts`` of the numpy twin of a scene (Blender's splat objects; no torch needed)."""
+    with np.errstate(over="ignore"):
+        opacities = 1.0 / (1.0 + np.exp(-scene.opacity_logits.astype(np.float32)))
+    return _parts(scene.means.astype(np.float64), 0.5 + SH_C0 * scene.sh_dc.astype(np.float32), opacities, scale)
+
+
+def _parts(means: np.ndarray, colours: np.ndarray, opacities: np.ndarray, scale: float) -> Parts:
+    """The parts of splats at ``means`` (N, 3) of sRGB ``colours`` (N, 3, any range) and ``opacities``."""
     if not len(means):
         return Parts(np.zeros(0, np.int64), np.zeros((0, 3)), np.zeros(0, np.int64))
-    colours = scene.base_colors.detach().float().clamp(0.0, 1.0).cpu().numpy()
-    opacities = scene.opacities.detach().float().cpu().numpy().reshape(-1)
+    colours = np.clip(colours, 0.0, 1.0).astype(np.float32)
+    opacities = opacities.reshape(-1)
     cells, shape = _cells(means)
     occupied, cell_of = np.unique(cells, return_inverse=True)
-    lab = cv2.cvtColor(colours.reshape(-1, 1, 3), cv2.COLOR_RGB2Lab).reshape(-1, 3).astype(np.float64)
+    lab = srgb_to_lab(colours)
     weight = np.where(opacities >= MIN_OPACITY, opacities, 1e-3).astype(np.float64)
     mean_lab = _cell_means(cell_of, lab, weight, len(occupied))
     edges = _neighbour_edges(occupied, shape, mean_lab)
@@ -82,6 +108,16 @@ def find_parts(scene: GaussianScene, scale: float = SCALE) -> Parts:
         [np.average(colours[labels == p], axis=0, weights=weight[labels == p]) for p in range(len(sizes))]
     )
     return Parts(labels, part_colours.clip(0.0, 1.0), sizes)
+
+
+def srgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """(N, 3) CIE Lab (float64) of sRGB colours in [0, 1], as OpenCV's ``COLOR_RGB2Lab`` of float images."""
+    rgb = np.asarray(rgb, np.float64)
+    linear = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+    xyz = linear @ SRGB_TO_XYZ.T / WHITE
+    f = np.where(xyz > 0.008856, np.cbrt(xyz), 7.787 * xyz + 16.0 / 116.0)
+    lightness = np.where(xyz[:, 1] > 0.008856, 116.0 * f[:, 1] - 16.0, 903.3 * xyz[:, 1])
+    return np.stack([lightness, 500.0 * (f[:, 0] - f[:, 1]), 200.0 * (f[:, 1] - f[:, 2])], axis=1)
 
 
 def _refined(
