@@ -181,12 +181,16 @@ def _attribute_values(values: np.ndarray) -> np.ndarray:
 def splat_colors(sh_dc: np.ndarray, opacity_logits: np.ndarray) -> np.ndarray:
     """(N,4) float32 scene-linear RGBA: sRGB DC colour clamped to [0,1] -> linear, alpha = sigmoid(opacity)."""
     srgb = np.clip(0.5 + SH_C0 * sh_dc.astype(np.float32), 0.0, 1.0)
-    linear = np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
     rgba = np.empty((len(srgb), 4), np.float32)
-    rgba[:, :3] = linear
+    rgba[:, :3] = srgb_to_linear(srgb)
     with np.errstate(over="ignore"):
         rgba[:, 3] = 1.0 / (1.0 + np.exp(-opacity_logits.astype(np.float32).reshape(-1)))
     return rgba
+
+
+def srgb_to_linear(srgb: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] as scene-linear (Blender's float colours and colour properties)."""
+    return np.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
 
 
 def object_colour(colors: np.ndarray) -> tuple[float, float, float, float]:

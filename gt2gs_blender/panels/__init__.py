@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ..blender.registration import ModuleGroup
-from . import preferences, result, sections, settings, sidebar, transfer_panel
+from . import parts, preferences, result, sections, settings, sidebar, transfer_panel
 
-_group = ModuleGroup((settings, sidebar, transfer_panel, sections, result, preferences))
+_group = ModuleGroup((settings, sidebar, transfer_panel, parts, sections, result, preferences))
 register = _group.register
 unregister = _group.unregister

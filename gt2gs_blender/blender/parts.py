@@ -1,0 +1,73 @@
+"""A splat object's parts (``core.scene.parts``) in Blender: each point's part in a hidden point attribute, the list
+the sidebar shows (``scene.gt2gs_parts``), the object and point count they were found for, and a part's points
+selected as Edit Mode's selection, the region a run restyles with Selected Points Only.
+
+The functions take the scene's parts list (``store``: ``items`` of part / splats / colour, ``object``,
+``point_count``) and the object; the operators and the sidebar only call them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.scene.parts import find_parts_in
+from . import splats
+from .transfer_run import SELECTION_ATTRIBUTE, RunError
+
+LABEL_ATTRIBUTE = ".gt2gs_part"
+"""Each point's part (INT, POINT domain); the leading dot keeps it out of exported files."""
+
+
+def find(obj, store) -> int:
+    """Find ``obj``'s parts, label its points and list the parts in ``store``; the number of parts."""
+    scene, _ = splats.object_to_scene(obj)
+    parts = find_parts_in(scene)
+    attributes = obj.data.attributes
+    old = attributes.get(LABEL_ATTRIBUTE)
+    if old is not None:
+        attributes.remove(old)
+    attributes.new(LABEL_ATTRIBUTE, "INT", "POINT").data.foreach_set("value", parts.labels.astype(np.int32))
+    store.items.clear()
+    for part, (size, colour) in enumerate(zip(parts.sizes, splats.srgb_to_linear(parts.colours), strict=True)):
+        item = store.items.add()
+        item.part, item.splats, item.colour = part, int(size), tuple(float(c) for c in colour)
+    store.object, store.point_count, store.active = obj, len(obj.data.points), 0
+    return len(parts)
+
+
+def stale_text(store, obj) -> str | None:
+    """Why the listed parts are not those of ``obj`` (the run's object) any more, or None when they are (or none
+    are listed)."""
+    if not store.items:
+        return None
+    found = store.object
+    if found is None:
+        return "Found for an object that is gone: Find Parts again"
+    if obj is None or found.name != obj.name:
+        return f"Found for {found.name!r}, not this object: Find Parts again"
+    if len(obj.data.points) != store.point_count or obj.data.attributes.get(LABEL_ATTRIBUTE) is None:
+        return "The object changed since: Find Parts again"
+    return None
+
+
+def select(obj, store, part: int) -> int:
+    """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection); the number selected. RunError
+    when the listed parts are stale or there is no such part."""
+    problem = stale_text(store, obj) if store.items else "No parts yet: Find Parts first"
+    if problem:
+        raise RunError(problem)
+    if not 0 <= part < len(store.items):
+        raise RunError(f"there is no part {part}: the object has parts 0 to {len(store.items) - 1}")
+    labels = np.empty(len(obj.data.points), np.int32)
+    obj.data.attributes[LABEL_ATTRIBUTE].data.foreach_get("value", labels)
+    chosen = labels == part
+    attributes = obj.data.attributes
+    selection = attributes.get(SELECTION_ATTRIBUTE)
+    if selection is not None and selection.domain != "POINT":
+        attributes.remove(selection)
+        selection = None
+    if selection is None:
+        selection = attributes.new(SELECTION_ATTRIBUTE, "BOOLEAN", "POINT")
+    selection.data.foreach_set("value", chosen if selection.data_type == "BOOLEAN" else chosen.astype(np.float32))
+    obj.data.update_tag()
+    return int(chosen.sum())

@@ -1,0 +1,85 @@
+"""Find Parts and Select Part (``gt2gs.find_parts``, ``gt2gs.select_part``): split the splat object into parts by
+colour and position, then select one part's splats so Selected Points Only restyles just that part (the guitar's
+body and not its stand)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.props import IntProperty
+
+from ..blender import parts, splats, transfer_run
+
+
+def _target(cls, context):
+    """The object a run restyles (the panel's target, else the active object), saying why not in the poll."""
+    obj = transfer_run.target_object(context)
+    if obj is None:
+        cls.poll_message_set("Select a Gaussian splat object")
+    return obj
+
+
+class GT2GS_OT_find_parts(bpy.types.Operator):
+    """Split the splat object into parts by colour and position (a guitar's body, neck and stand), to restyle one"""
+
+    bl_idname = "gt2gs.find_parts"
+    bl_label = "Find Parts"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context):
+        return _target(cls, context) is not None
+
+    def execute(self, context):
+        obj = transfer_run.target_object(context)
+        context.window_manager.progress_begin(0, 1)
+        try:
+            count = parts.find(obj, context.scene.gt2gs_parts)
+        except splats.SplatObjectError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        finally:
+            context.window_manager.progress_end()
+        self.report({"INFO"}, f"{obj.name!r} has {count} part{'s' if count != 1 else ''}")
+        return {"FINISHED"}
+
+
+class GT2GS_OT_select_part(bpy.types.Operator):
+    """Select this part's splats in Edit Mode and restyle only them (turns on Selected Points Only)"""
+
+    bl_idname = "gt2gs.select_part"
+    bl_label = "Select Part"
+    bl_options = {"REGISTER", "UNDO"}
+
+    part: IntProperty(
+        name="Part", default=-1, min=-1, description="The part to select (-1: the one picked in the list)"
+    )
+
+    @classmethod
+    def poll(cls, context):
+        if _target(cls, context) is None:
+            return False
+        if not context.scene.gt2gs_parts.items:
+            cls.poll_message_set("Find Parts first")
+            return False
+        return True
+
+    def execute(self, context):
+        obj = transfer_run.target_object(context)
+        store = context.scene.gt2gs_parts
+        part = self.part if self.part >= 0 else store.active
+        try:
+            count = parts.select(obj, store, part)
+        except transfer_run.RunError as exc:
+            self.report({"ERROR"}, str(exc))
+            return {"CANCELLED"}
+        store.active = part
+        if context.view_layer.objects.active is obj and obj.mode != "EDIT":
+            bpy.ops.object.mode_set(mode="EDIT")  # the artist sees the part selected
+        context.scene.gt2gs.region_only = True  # a run and the live preview restyle only the selection
+        self.report({"INFO"}, f"Part {part} selected ({count:,} splats); only it will be restyled")
+        return {"FINISHED"}
+
+
+classes = (GT2GS_OT_find_parts, GT2GS_OT_select_part)
+
+register, unregister = bpy.utils.register_classes_factory(classes)
