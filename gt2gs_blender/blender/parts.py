@@ -1,6 +1,7 @@
 """A splat object's parts (``core.scene.parts``) in Blender: each point's part in a hidden point attribute, the list
 the sidebar shows (``scene.gt2gs_parts``), the object and point count they were found for, and a part's points
-selected as Edit Mode's selection, the region a run restyles with Selected Points Only.
+selected as Edit Mode's selection (or the points selected there grown to
+their whole parts), the region a run restyles with Selected Points Only.
 
 The functions take the scene's parts list (``store``: ``items`` of part / splats / colour, ``object``,
 ``point_count``) and the object; the operators and the sidebar only call them.
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.scene.parts import find_parts_in
-from . import splats
+from . import splats, transfer_run
 from .transfer_run import SELECTION_ATTRIBUTE, RunError
 
 LABEL_ATTRIBUTE = ".gt2gs_part"
@@ -50,17 +51,37 @@ def stale_text(store, obj) -> str | None:
     return None
 
 
-def select(obj, store, part: int) -> int:
-    """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection); the number selected. RunError
+def select(obj, store, part: int) -> list[int]:
+    """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection); the parts now selected. RunError
     when the listed parts are stale or there is no such part."""
+    labels = _labels(obj, store)
+    if not 0 <= part < len(store.items):
+        raise RunError(f"there is no part {part}: the object has parts 0 to {len(store.items) - 1}")
+    _set_selection(obj, labels == part)
+    return [part]
+
+
+def grow(obj, store) -> list[int]:
+    """Grow the points selected in Edit Mode to the whole parts they belong to (a click on a splat picks its part);
+    the parts now selected. RunError when the listed parts are stale or no point is selected."""
+    labels = _labels(obj, store)
+    chosen = np.unique(labels[transfer_run.selected_points(obj)])
+    _set_selection(obj, np.isin(labels, chosen))
+    return [int(p) for p in chosen]
+
+
+def _labels(obj, store) -> np.ndarray:
+    """(N,) each point's part; RunError when there are no parts or they are stale."""
     problem = stale_text(store, obj) if store.items else "No parts yet: Find Parts first"
     if problem:
         raise RunError(problem)
-    if not 0 <= part < len(store.items):
-        raise RunError(f"there is no part {part}: the object has parts 0 to {len(store.items) - 1}")
     labels = np.empty(len(obj.data.points), np.int32)
     obj.data.attributes[LABEL_ATTRIBUTE].data.foreach_get("value", labels)
-    chosen = labels == part
+    return labels
+
+
+def _set_selection(obj, chosen: np.ndarray) -> None:
+    """Make ``chosen`` (N,) bool Edit Mode's point selection."""
     attributes = obj.data.attributes
     selection = attributes.get(SELECTION_ATTRIBUTE)
     if selection is not None and selection.domain != "POINT":
@@ -70,4 +91,3 @@ def select(obj, store, part: int) -> int:
         selection = attributes.new(SELECTION_ATTRIBUTE, "BOOLEAN", "POINT")
     selection.data.foreach_set("value", chosen if selection.data_type == "BOOLEAN" else chosen.astype(np.float32))
     obj.data.update_tag()
-    return int(chosen.sum())

@@ -1,8 +1,12 @@
-"""Find Parts and Select Part (``gt2gs.find_parts``, ``gt2gs.select_part``): split the splat object into parts by
-colour and position, then select one part's splats so Selected Points Only restyles just that part (the guitar's
-body and not its stand)."""
+"""Find Parts, Select Part and Select Whole Parts (``gt2gs.find_parts``, ``gt2gs.select_part``,
+``gt2gs.select_whole_parts``): split the splat object into parts by colour and position, then select a part's splats
+(picked in the list, or grown from splats clicked in Edit Mode) so Selected Points Only restyles just that part (the
+guitar's body and not its stand)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 import bpy
 from bpy.props import IntProperty
@@ -16,6 +20,16 @@ def _target(cls, context):
     if obj is None:
         cls.poll_message_set("Select a Gaussian splat object")
     return obj
+
+
+def _parts_found(cls, context) -> bool:
+    """Poll of the selecting operators: a target whose parts were found (stale ones are refused when run)."""
+    if _target(cls, context) is None:
+        return False
+    if not context.scene.gt2gs_parts.items:
+        cls.poll_message_set("Find Parts first")
+        return False
+    return True
 
 
 class GT2GS_OT_find_parts(bpy.types.Operator):
@@ -54,32 +68,50 @@ class GT2GS_OT_select_part(bpy.types.Operator):
         name="Part", default=-1, min=-1, description="The part to select (-1: the one picked in the list)"
     )
 
-    @classmethod
-    def poll(cls, context):
-        if _target(cls, context) is None:
-            return False
-        if not context.scene.gt2gs_parts.items:
-            cls.poll_message_set("Find Parts first")
-            return False
-        return True
+    poll = classmethod(_parts_found)
 
     def execute(self, context):
-        obj = transfer_run.target_object(context)
         store = context.scene.gt2gs_parts
         part = self.part if self.part >= 0 else store.active
-        try:
-            count = parts.select(obj, store, part)
-        except transfer_run.RunError as exc:
-            self.report({"ERROR"}, str(exc))
-            return {"CANCELLED"}
-        store.active = part
-        if context.view_layer.objects.active is obj and obj.mode != "EDIT":
-            bpy.ops.object.mode_set(mode="EDIT")  # the artist sees the part selected
-        context.scene.gt2gs.region_only = True  # a run and the live preview restyle only the selection
-        self.report({"INFO"}, f"Part {part} selected ({count:,} splats); only it will be restyled")
-        return {"FINISHED"}
+        return _select(self, context, lambda obj: parts.select(obj, store, part))
 
 
-classes = (GT2GS_OT_find_parts, GT2GS_OT_select_part)
+class GT2GS_OT_select_whole_parts(bpy.types.Operator):
+    """Grow the splats selected in Edit Mode to their whole parts: click a splat of the body, then this"""
+
+    bl_idname = "gt2gs.select_whole_parts"
+    bl_label = "Select Whole Parts"
+    bl_options = {"REGISTER", "UNDO"}
+
+    poll = classmethod(_parts_found)
+
+    def execute(self, context):
+        store = context.scene.gt2gs_parts
+        return _select(self, context, lambda obj: parts.grow(obj, store))
+
+
+def _select(op, context, selects: Callable[[Any], list[int]]) -> set[str]:
+    """Run ``selects`` on the target (it returns the parts it selected), show the selection in Edit Mode and restyle
+    only it; reports what was selected."""
+    obj = transfer_run.target_object(context)
+    store = context.scene.gt2gs_parts
+    try:
+        chosen = selects(obj)
+    except transfer_run.RunError as exc:
+        op.report({"ERROR"}, str(exc))
+        return {"CANCELLED"}
+    store.active = chosen[0]
+    if context.view_layer.objects.active is obj and obj.mode != "EDIT":
+        bpy.ops.object.mode_set(mode="EDIT")  # the artist sees the part selected
+    context.scene.gt2gs.region_only = True  # a run and the live preview restyle only the selection
+    count = sum(store.items[p].splats for p in chosen)
+    names = ", ".join(str(p) for p in chosen)
+    op.report(
+        {"INFO"}, f"Part{'s' if len(chosen) > 1 else ''} {names} selected ({count:,} splats); only they are restyled"
+    )
+    return {"FINISHED"}
+
+
+classes = (GT2GS_OT_find_parts, GT2GS_OT_select_part, GT2GS_OT_select_whole_parts)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

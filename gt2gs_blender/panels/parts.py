@@ -1,5 +1,6 @@
-"""The Parts sub-panel: Find Parts, the parts as a list (colour swatch, "Part N", splats) and Select Part, which
-selects a part's splats and turns on Selected Points Only, so a run and the orientation preview restyle just that
+"""The Parts sub-panel: Find Parts, the parts as a list (colour swatch, "Part N", splats), Select Part, which
+selects the picked part's splats, and Select Whole Parts, which grows the splats clicked in Edit Mode to their parts;
+both turn on Selected Points Only, so a run and the orientation preview restyle just that
 part. The list lives in ``scene.gt2gs_parts`` with the object and point count it was found for; the sub-panel
 says when those no longer match (``blender/parts.py``'s ``stale_text``)."""
 
@@ -69,7 +70,9 @@ class VIEW3D_PT_gt2gs_parts(bpy.types.Panel):
         column = layout.column()
         column.enabled = stale is None
         column.template_list("GT2GS_UL_parts", "", store, "items", store, "active", rows=3)
-        column.operator("gt2gs.select_part", icon="RESTRICT_SELECT_OFF")
+        buttons = column.column(align=True)
+        buttons.operator("gt2gs.select_part", icon="RESTRICT_SELECT_OFF")
+        buttons.operator("gt2gs.select_whole_parts", icon="SELECT_EXTEND")
         draw_setting(layout, context.scene.gt2gs, "region_only", None)
 
 

@@ -69,7 +69,12 @@ def test_find_parts_lists_the_two_boxes_with_their_counts_and_colours(boxes):
     before = draw_panel(VIEW3D_PT_gt2gs_parts, bpy.context)
     assert before[0] == "gt2gs.find_parts" and " ".join(before[1:]) == NO_PARTS_TEXT
     assert bpy.ops.gt2gs.find_parts() == {"FINISHED"}
-    assert draw_panel(VIEW3D_PT_gt2gs_parts, bpy.context) == ["gt2gs.find_parts", "gt2gs.select_part", "region_only"]
+    assert draw_panel(VIEW3D_PT_gt2gs_parts, bpy.context) == [
+        "gt2gs.find_parts",
+        "gt2gs.select_part",
+        "gt2gs.select_whole_parts",
+        "region_only",
+    ]
     row: list = []
     GT2GS_UL_parts.draw_item(None, bpy.context, RecordingLayout(row), store, store.items[1], 0, store, "active")
     assert row == ["colour", "Part 1", f"{STAND} splats"]
@@ -92,6 +97,17 @@ def test_select_part_selects_exactly_its_splats_and_restyles_only_them(boxes):
     np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY))
     with pytest.raises(RuntimeError, match="parts 0 to 1"):
         bpy.ops.gt2gs.select_part(part=2)
+    clicked = np.zeros(BODY + STAND, bool)
+    clicked[BODY + 7] = True  # one splat of the stand, as a click in Edit Mode selects it
+    boxes.data.attributes[transfer_run.SELECTION_ATTRIBUTE].data.foreach_set("value", clicked)
+    assert bpy.ops.gt2gs.select_whole_parts() == {"FINISHED"}
+    np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY, BODY + STAND))
+    assert bpy.context.scene.gt2gs_parts.active == 1
+    clicked[3] = True  # and one of the body: both parts
+    boxes.data.attributes[transfer_run.SELECTION_ATTRIBUTE].data.foreach_set("value", clicked)
+    assert bpy.ops.gt2gs.select_whole_parts() == {"FINISHED"}
+    np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY + STAND))
+    assert bpy.ops.gt2gs.select_part(part=0) == {"FINISHED"}
     bpy.ops.object.mode_set(mode="OBJECT")
     bpy.context.scene.gt2gs.result_mode = "IN_PLACE"
     original = dc(boxes)
@@ -133,8 +149,9 @@ def test_parts_found_for_another_object_are_marked_stale(boxes, tmp_path):
     store, active = bpy.context.scene.gt2gs_parts, bpy.context.active_object
     assert parts.stale_text(store, active) == f"Found for {boxes.name!r}, not this object: Find Parts again"
     shown = draw_panel(VIEW3D_PT_gt2gs_parts, bpy.context)
-    assert shown[0] == "gt2gs.find_parts" and shown[-2:] == ["gt2gs.select_part", "region_only"]
-    assert " ".join(shown[1:-2]) == parts.stale_text(store, active)  # in lines that fit the sidebar
+    buttons = ["gt2gs.select_part", "gt2gs.select_whole_parts", "region_only"]
+    assert shown[0] == "gt2gs.find_parts" and shown[-3:] == buttons
+    assert " ".join(shown[1:-3]) == parts.stale_text(store, active)  # in lines that fit the sidebar
     assert all(len(text) <= LINE_CHARS for text in shown)
     with pytest.raises(RuntimeError, match="not this object"):
         bpy.ops.gt2gs.select_part(part=0)
