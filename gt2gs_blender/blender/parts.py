@@ -51,14 +51,18 @@ def stale_text(store, obj) -> str | None:
     return None
 
 
-def select(obj, store, part: int) -> list[int]:
-    """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection); the parts now selected. RunError
-    when the listed parts are stale or there is no such part."""
+def select(obj, store, part: int, extend: bool = False) -> list[int]:
+    """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection), or add them to it (``extend``);
+    the parts now selected whole. RunError when the listed parts are stale or there is no such part."""
     labels = _labels(obj, store)
     if not 0 <= part < len(store.items):
         raise RunError(f"there is no part {part}: the object has parts 0 to {len(store.items) - 1}")
-    _set_selection(obj, labels == part)
-    return [part]
+    chosen = labels == part
+    current = transfer_run.selection_mask(obj) if extend else None
+    if current is not None:
+        chosen |= current
+    _set_selection(obj, chosen)
+    return [p for p in range(len(store.items)) if chosen[labels == p].all() and (labels == p).any()]
 
 
 def grow(obj, store) -> list[int]:

@@ -220,15 +220,22 @@ def texture_spec(context, job: Job, override: str | None) -> str:
     return "texture.npy"
 
 
+def selection_mask(obj) -> np.ndarray | None:
+    """(N,) bool: the points selected in Edit Mode, or None when the object has no point selection."""
+    attribute = obj.data.attributes.get(SELECTION_ATTRIBUTE)
+    if attribute is None or attribute.domain != "POINT":
+        return None
+    values = np.empty(len(obj.data.points), bool if attribute.data_type == "BOOLEAN" else np.float32)
+    attribute.data.foreach_get("value", values)
+    return values > 0
+
+
 def selected_points(obj) -> np.ndarray:
     """Indices of the points selected in Edit Mode; RunError when none are."""
-    attribute = obj.data.attributes.get(SELECTION_ATTRIBUTE)
-    n = len(obj.data.points)
-    if attribute is None or attribute.domain != "POINT":
+    mask = selection_mask(obj)
+    if mask is None:
         raise RunError(f"{obj.name!r} has no point selection: select points in Edit Mode first")
-    values = np.empty(n, bool if attribute.data_type == "BOOLEAN" else np.float32)
-    attribute.data.foreach_get("value", values)
-    indices = np.flatnonzero(values > 0)
+    indices = np.flatnonzero(mask)
     if indices.size == 0:
         raise RunError(f"no points of {obj.name!r} are selected")
     return indices

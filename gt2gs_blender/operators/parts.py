@@ -9,7 +9,7 @@ from collections.abc import Callable
 from typing import Any
 
 import bpy
-from bpy.props import IntProperty
+from bpy.props import BoolProperty, IntProperty
 
 from ..blender import parts, splats, transfer_run
 
@@ -58,7 +58,7 @@ class GT2GS_OT_find_parts(bpy.types.Operator):
 
 
 class GT2GS_OT_select_part(bpy.types.Operator):
-    """Select this part's splats in Edit Mode and restyle only them (turns on Selected Points Only)"""
+    """Select this part's splats in Edit Mode (Shift: add them) and restyle only them (turns on Selected Points Only)"""
 
     bl_idname = "gt2gs.select_part"
     bl_label = "Select Part"
@@ -68,12 +68,21 @@ class GT2GS_OT_select_part(bpy.types.Operator):
         name="Part", default=-1, min=-1, description="The part to select (-1: the one picked in the list)"
     )
 
+    extend: BoolProperty(
+        name="Extend", default=False, description="Add the part to the selection (Shift-click) instead of replacing it"
+    )
+
     poll = classmethod(_parts_found)
+
+    def invoke(self, context, event):
+        if not self.properties.is_property_set("extend"):
+            self.extend = event.shift
+        return self.execute(context)
 
     def execute(self, context):
         store = context.scene.gt2gs_parts
         part = self.part if self.part >= 0 else store.active
-        return _select(self, context, lambda obj: parts.select(obj, store, part))
+        return _select(self, context, lambda obj: parts.select(obj, store, part, self.extend), part)
 
 
 class GT2GS_OT_select_whole_parts(bpy.types.Operator):
@@ -87,12 +96,13 @@ class GT2GS_OT_select_whole_parts(bpy.types.Operator):
 
     def execute(self, context):
         store = context.scene.gt2gs_parts
-        return _select(self, context, lambda obj: parts.grow(obj, store))
+        return _select(self, context, lambda obj: parts.grow(obj, store), None)
 
 
-def _select(op, context, selects: Callable[[Any], list[int]]) -> set[str]:
-    """Run ``selects`` on the target (it returns the parts it selected), show the selection in Edit Mode and restyle
-    only it; reports what was selected."""
+def _select(op, context, selects: Callable[[Any], list[int]], picked: int | None) -> set[str]:
+    """Run ``selects`` on the target (it returns the parts now selected whole), show the selection in Edit Mode
+    and restyle only it; the list's pick moves to ``picked`` (None: the first part selected); reports what was
+    selected."""
     obj = transfer_run.target_object(context)
     store = context.scene.gt2gs_parts
     try:
@@ -100,11 +110,11 @@ def _select(op, context, selects: Callable[[Any], list[int]]) -> set[str]:
     except transfer_run.RunError as exc:
         op.report({"ERROR"}, str(exc))
         return {"CANCELLED"}
-    store.active = chosen[0]
+    store.active = picked if picked is not None else chosen[0]
     if context.view_layer.objects.active is obj and obj.mode != "EDIT":
         bpy.ops.object.mode_set(mode="EDIT")  # the artist sees the part selected
     context.scene.gt2gs.region_only = True  # a run and the live preview restyle only the selection
-    count = sum(store.items[p].splats for p in chosen)
+    count = int(transfer_run.selection_mask(obj).sum())
     names = ", ".join(str(p) for p in chosen)
     op.report(
         {"INFO"}, f"Part{'s' if len(chosen) > 1 else ''} {names} selected ({count:,} splats); only they are restyled"

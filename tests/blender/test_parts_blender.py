@@ -108,6 +108,10 @@ def test_select_part_selects_exactly_its_splats_and_restyles_only_them(boxes):
     assert bpy.ops.gt2gs.select_whole_parts() == {"FINISHED"}
     np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY + STAND))
     assert bpy.ops.gt2gs.select_part(part=0) == {"FINISHED"}
+    np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY))
+    assert bpy.ops.gt2gs.select_part(part=1, extend=True) == {"FINISHED"}  # Shift-click: both
+    np.testing.assert_array_equal(transfer_run.selected_points(boxes), np.arange(BODY + STAND))
+    assert bpy.ops.gt2gs.select_part(part=0) == {"FINISHED"}
     bpy.ops.object.mode_set(mode="OBJECT")
     bpy.context.scene.gt2gs.result_mode = "IN_PLACE"
     original = dc(boxes)
