@@ -421,6 +421,24 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     assert float(ideal[..., 0][covered & ~half].max()) == pytest.approx(1.0, abs=0.02)
 
 
+@pytest.mark.parametrize("keep", [1.0, 0.0])
+def test_a_whole_run_keeps_the_two_tones_of_the_scene_under_a_flat_texture(shared, tmp_path, keep):
+    """The half-dark wall (luminance 0.2 and 0.8) under a flat mid-grey texture, a whole short run with every
+    default of the method (texture loss, content and smoothness terms, colour transfer): at Keep Scene 1 the result's
+    dark half stays 0.2 / 0.8 as bright as its light half, within 0.05 (the closing colour transfer would squeeze
+    the two tones together); at Keep Scene 0 the halves come out alike."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam, _ = half_dark_wall()
+    grey = np.full((64, 64, 3), 0.5, np.float32)
+    config = wall_config(shared, tmp_path, stylise_steps=12, correct_steps=4, keep_scene=keep, background=(0, 0, 0))
+    result = transfer(scene, grey, [cam], config)
+    shown = render(result.scene, [cam], background=torch.zeros(3)).colors[0].mean(-1)
+    left, right = shown[16:80, 8 : 48 - 8].mean(), shown[16:80, 48 + 8 : 96 - 8].mean()
+    ratio = float(left / right)
+    assert ratio == pytest.approx(0.25, abs=0.05) if keep else ratio == pytest.approx(1.0, abs=0.1)
+
+
 def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(shared, tmp_path):
     """The half-dark wall with Scene Softness 0.1 repeat (0.1 world units here): four widths from the seam
     each half keeps its shade, on the seam the splats and the layout term's image take the shade of the mean

@@ -148,13 +148,14 @@ class TransferConfig(MachineSettings):
         "texture",
     )
     lambda_layout: float = setting(
-        1.0,
+        10.0,
         "Layout Strength",
-        "How closely the result keeps the laid-out texture's planks, bricks and cells while the texture "
-        "loss refines its look (with Lay Out Texture on)",
+        "How closely the result keeps the laid-out texture, with the scene under it as Keep Scene lays it (its "
+        "planks, bricks and cells, and the capture's light and dark), while the texture loss refines its look "
+        "(with Lay Out Texture on); lower lets the texture loss repaint more of the scene",
         "texture",
         min=0.0,
-        soft_max=10.0,
+        soft_max=50.0,
     )
     texture_height: int = setting(
         256,
