@@ -2,7 +2,7 @@
 schedule, on the donut and the fern (bench/recognise_scenes.py's scenes and transfer views).
 
 ``python bench/paper_presets.py [--scenes donut fern] [--texture herringbone_wood] [--scale 0.1]
-[--resolution 256] [--variants before after] [--fern-iterations N]``
+[--resolution 256] [--variants before after] [--fern-iterations N] [--tag paper_presets]``
 
 Both variants run on today's engine, one after the other in this process. ``after`` is ``paper-llff`` as it is;
 ``before`` is it with the values the preset held before issue 41 (20 rounds of GT² + correct, colour rate 0.02,
@@ -12,7 +12,7 @@ difference of the old code was a setting too, or nothing (the bank crop of the V
 densification interval scaled, so each run densifies as often as the full schedule), the views at
 ``--resolution``. Reports the run's content measures (``ssim`` of the frames, ``object_ssim`` on the
 original's pixels), texture match (start and end), Gaussians and seconds (inflated by the machine's load: compare
-ratios). Writes bench/out/paper_presets.json.
+ratios). Writes bench/out/<tag>.json.
 """
 
 from __future__ import annotations
@@ -98,6 +98,7 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, default=256)
     parser.add_argument("--variants", nargs="+", default=["before", "after"], choices=["before", "after"])
     parser.add_argument("--fern-iterations", type=int, help="a shorter fern fit than recognise_scenes' (cached apart)")
+    parser.add_argument("--tag", default="paper_presets", help="writes bench/out/<tag>.json")
     args = parser.parse_args()
     if args.fern_iterations:
         recognise_scenes.FERN_FIT = {**recognise_scenes.FERN_FIT, "iterations": args.fern_iterations}
@@ -115,7 +116,7 @@ def main() -> None:
                     flush=True,
                 )
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "paper_presets.json").write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
+    (OUT / f"{args.tag}.json").write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
 
 
 if __name__ == "__main__":
