@@ -2,7 +2,10 @@
 
 ``python bench/transfer.py [--preset fast] [--set key=value ...] [--profile] [--warm-bank]`` runs the
 shared donut with the herringbone-wood photo by default, prints a table and writes
-bench/out/transfer_<preset>.json. The texture bank is built into a fresh cache unless
+bench/out/transfer_<preset>.json. ``--backends cpu,numba,torch [--rounds R]`` runs the transfer once per
+rasterizer backend, the backends interleaved, R rounds, in this one process, and adds a table of their
+times side by side with each one's median ratio to the first backend's time in the same round.
+The texture bank is built into a fresh cache unless
 ``--warm-bank`` (so the time is end to end: weights, bank, colour transfer, stylisation, GPB,
 metrics). ``--profile`` runs under cProfile and splits the time into render forward/backward, VGG
 forward, the other backward (VGG and losses), matching, the optimiser and the correct phases. Timings
@@ -16,6 +19,7 @@ import cProfile
 import json
 import os
 import pstats
+import statistics
 import sys
 import tempfile
 import time
@@ -160,15 +164,46 @@ def main() -> None:
     parser.add_argument("--profile", action="store_true", help="split the time by component (cProfile)")
     parser.add_argument("--warm-bank", action="store_true", help="use the user's bank cache (not end to end)")
     parser.add_argument("--json", type=Path, help="default bench/out/transfer_<preset>.json")
+    parser.add_argument("--backends", help="comma-separated rasterizer backends to run side by side (e.g. cpu,numba)")
+    parser.add_argument("--rounds", type=int, default=1, help="with --backends: rounds of one run per backend")
     args = parser.parse_args()
     OUT.mkdir(parents=True, exist_ok=True)
     overrides = parse_overrides(args.overrides)
+    if args.backends:
+        records = compare_backends(args, overrides, args.backends.split(","))
+        path = args.json or OUT / f"transfer_{args.preset}_backends.json"
+        path.write_text(json.dumps(records, indent=1))
+        print(f"records: {path}")
+        return
     with tempfile.TemporaryDirectory() as fresh:
         record = run(args, overrides, None if args.warm_bank else fresh)
     print_record(record)
     path = args.json or OUT / f"transfer_{args.preset}.json"
     path.write_text(json.dumps(record, indent=1))
     print(f"record: {path}")
+
+
+def compare_backends(args: argparse.Namespace, overrides: dict[str, Any], backends: list[str]) -> list[dict[str, Any]]:
+    """``args.rounds`` rounds of one transfer per backend, interleaved in this process; prints every record,
+    then the backends side by side (peak RSS is the process's so far: only the first run's is its own)."""
+    records = []
+    for round_ in range(args.rounds):
+        for backend in backends:
+            with tempfile.TemporaryDirectory() as fresh:
+                record = run(args, {**overrides, "backend": backend}, None if args.warm_bank else fresh)
+            record["round"] = round_
+            print_record(record)
+            records.append(record)
+    first = {r["round"]: r["seconds"] for r in records if r["overrides"]["backend"] == backends[0]}
+    print(f"\n{'backend':<8} {'total s (per round)':<24} {'stylise s':<18} {'ratio to ' + backends[0]:<14} peak MiB")
+    for backend in backends:
+        mine = [r for r in records if r["overrides"]["backend"] == backend]
+        ratio = statistics.median(r["seconds"] / first[r["round"]] for r in mine)
+        totals = ", ".join(f"{r['seconds']:.1f}" for r in mine)
+        stylise = ", ".join(f"{r['stage_seconds'].get('stylise', 0.0):.1f}" for r in mine)
+        peak = max(r["peak"]["rss_peak_mib"] for r in mine)
+        print(f"{backend:<8} {totals:<24} {stylise:<18} {ratio:<14.2f} {peak:.0f}")
+    return records
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ subprocess (one of them with its address space capped, to run out of memory for 
 from __future__ import annotations
 
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -61,6 +62,27 @@ def foreground_fraction(path: Path, background_bgr: tuple[int, int, int] = (255,
 
 
 # -- info -------------------------------------------------------------------------------------------
+
+
+def test_info_without_a_scene_says_which_rasterizer_runs_and_why(capsys, tmp_path):
+    """``info`` alone names the rasterizer ``auto`` resolves to here; with no C++ compiler (CXX and PATH
+    pointing nowhere, in a subprocess) it names the numba kernel and why."""
+    from gt2gs_blender.core.render import numba_backend, resolve_backend
+
+    code, out, _ = run(capsys, "info", "--json")
+    assert code == 0 and json.loads(out)["rasterizer"] == resolve_backend("auto", "cpu")
+    nowhere = tmp_path / "no-bin"
+    nowhere.mkdir()
+    env = {**os.environ, "CXX": str(nowhere / "c++"), "PATH": str(nowhere), "GT2GS_BUILD_DIR": str(tmp_path)}
+    command = [sys.executable, "-m", "gt2gs_blender", "info"]
+    proc = subprocess.run(command, capture_output=True, text=True, env=env, cwd=REPO, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    first = proc.stdout.splitlines()[0]
+    if numba_backend.installed():
+        assert first.startswith("rasterizer:   CPU kernel through numba (no C++ compiler found;"), first
+    else:
+        assert first.startswith("rasterizer:   portable torch (no C++ compiler found and numba is not installed"), first
+    assert "C++ compiler: not found" in proc.stdout
 
 
 def test_info_generated_ply(capsys, small_ply):

@@ -140,6 +140,33 @@ def test_transfer_job_streams_progress_and_writes_the_result(job, tmp_path):
     assert not list(job.folder.rglob("*.tmp"))
 
 
+@pytest.mark.slow
+def test_fast_transfer_without_a_compiler_runs_the_numba_kernel(job, tmp_path):
+    """No C++ compiler (CXX and PATH point nowhere) and nothing compiled before: the worker JIT-compiles the
+    numba kernel as the visible compile stage, then a whole ``fast`` transfer runs on it, not on torch."""
+    pytest.importorskip("numba")
+    nowhere = tmp_path / "no-bin"
+    nowhere.mkdir()
+    job.env.pop("NUMBA_CACHE_DIR", None)
+    job.env.update(CXX=str(nowhere / "c++"), PATH=str(nowhere), GT2GS_BUILD_DIR=str(tmp_path / "build"))
+    spec = {**transfer_spec(tmp_path, resolution=64, n_views=3, evaluate=False), "preset": "fast"}
+    job.start(JobSpec.from_dict(spec))
+    messages = []
+    while not job.poll().finished:
+        messages.append((job.status.stage, job.status.message))
+        time.sleep(0.05)
+    status = job.status
+    assert status.state == DONE, (status, job.stderr_tail())
+    assert (
+        "compile",
+        "compiling the CPU rasterizer with numba (no C++ compiler here; first run only, about a minute)",
+    ) in messages
+    assert status.report["rasterizer"] == "numba" and status.report["config"]["backend"] == "auto"
+    assert not list((tmp_path / "build").glob("raster_cpu-*/*.so")), "a C++ kernel was built"
+    assert list((tmp_path / "build" / "numba").glob("warm-*")), "the numba kernel's cache was not written"
+    assert colours_differ(read_ply_arrays(status.output).sh_dc, read_ply_arrays(job.path("input.ply")).sh_dc)
+
+
 def test_cancel_mid_run_stops_the_worker_and_writes_nothing(job, tmp_path):
     """How long the cancel takes is measured by bench/latency.py; a worker that ignored it would be killed
     after the grace period and fail the exit status check below."""

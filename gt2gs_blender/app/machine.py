@@ -1,4 +1,4 @@
-"""What a run would use on this machine: feature weights, rasterizer, C++ compiler, CUDA, kernel cache.
+"""What a run would use on this machine: feature weights, rasterizer (and why), C++ compiler, numba, CUDA, kernel cache.
 
 ``python -m gt2gs_blender.app.machine [--weights PATH] [--features F] [--backend B] [--device D] [--download]``
 prints it as one JSON object on stdout, with ``packages``: each required package imported here (its version,
@@ -20,7 +20,12 @@ from typing import Any
 from ..core.errors import GT2GSError
 from .deps import import_check
 
-RASTERIZERS = {"cpu": "compiled CPU kernel", "torch": "portable torch", "gsplat": "gsplat CUDA"}
+RASTERIZERS = {
+    "cpu": "compiled CPU kernel",
+    "numba": "CPU kernel through numba",
+    "torch": "portable torch",
+    "gsplat": "gsplat CUDA",
+}
 """What the preferences call each rasterizer backend."""
 
 
@@ -35,9 +40,20 @@ def compiler_found() -> str | None:
     return None if "unusable" in identity else identity
 
 
-def rasterizer(backend: str, cuda: bool, compiler: str | None, built: bool) -> tuple[str, str]:
-    """(backend, note) a run with ``backend`` would use, as ``core.render.resolve_backend`` picks it, without
-    building the kernel."""
+def numba_found() -> str | None:
+    """numba's version when it is installed (read from its metadata, nothing imported), else None."""
+    import importlib.metadata
+
+    try:
+        return importlib.metadata.version("numba")
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def rasterizer(backend: str, cuda: bool, compiler: str | None, built: bool, numba: str | None = None,
+               numba_compiled: bool = False) -> tuple[str, str]:  # fmt: skip
+    """(backend, note: why) a run with ``backend`` would use, as ``core.render.resolve_backend`` picks it,
+    without building the kernel; ``numba``: its version, None when it is not installed."""
     from ..core.render import gsplat_backend
 
     if cuda and backend != "torch":
@@ -46,11 +62,16 @@ def rasterizer(backend: str, cuda: bool, compiler: str | None, built: bool) -> t
         return "torch", "on the GPU (install gsplat for the faster CUDA rasterizer)"
     if backend == "torch":
         return "torch", "chosen in the preferences"
-    if built:
-        return "cpu", "built"
-    if compiler is not None:
-        return "cpu", "compiled at the first run (about a minute, once)"
-    return "torch", "no C++ compiler found, so the portable (slower) rasterizer runs"
+    if backend != "numba":
+        if built:
+            return "cpu", "built"
+        if compiler is not None:
+            return "cpu", "compiled at the first run (about a minute, once)"
+    why = "chosen in the preferences" if backend == "numba" else "no C++ compiler found"
+    if numba is not None:
+        when = "compiled" if numba_compiled else "compiled at the first run (about a minute, once)"
+        return "numba", f"{why}; the same kernel through numba {numba}, {when}"
+    return "torch", f"{why} and numba is not installed, so the portable (slower) rasterizer runs"
 
 
 def machine_info(
@@ -61,7 +82,7 @@ def machine_info(
 
     from ..core.device import resolve_device
     from ..core.features.weights import VGG16_URL, resolve_weights, search_dirs
-    from ..core.render import kernel_cache
+    from ..core.render import kernel_cache, numba_backend
 
     cuda = torch.cuda.is_available()
     info: dict[str, Any] = {
@@ -83,9 +104,13 @@ def machine_info(
         info["weights_folders"] = []
     compiler = compiler_found()
     built = kernel_cache.is_built()
-    name, note = rasterizer(backend, info["device"] == "cuda", compiler, built)
+    numba = numba_found()
+    numba_compiled = numba is not None and numba_backend.is_compiled()
+    name, note = rasterizer(backend, info["device"] == "cuda", compiler, built, numba, numba_compiled)
     info.update(
         compiler=compiler,
+        numba=numba,
+        numba_compiled=numba_compiled,
         kernel_cache=str(kernel_cache.cache_base()),
         kernel_built=built,
         rasterizer=name,

@@ -94,18 +94,32 @@ def _send(events: Events, p: Progress, frame: Path | None = None) -> None:
 
 def _prepare_kernel(config: TransferConfig, progress: Callable[[Progress], None], cancel: Callable[[], bool]) -> None:
     """Build the CPU rasterizer first, as a ``compile`` stage, when the run will use it and it is not built
-    yet (once per kernel version: the UI shows a stage, not a run stuck at 0 %)."""
+    yet (once per kernel version: the UI shows a stage, not a run stuck at 0 %): the C++ kernel where a
+    compiler is found, else its numba port (JIT-compiled and cached)."""
     from ..core.device import resolve_device
-    from ..core.render import cpu_backend, kernel_cache
+    from ..core.render import cpu_backend, kernel_cache, numba_backend
+    from .machine import compiler_found
 
-    if config.backend not in ("auto", "cpu") or resolve_device(config.device).type != "cpu":
+    if config.backend not in ("auto", "cpu", "numba") or resolve_device(config.device).type != "cpu":
         return
-    if kernel_cache.is_built():
+    if config.backend != "numba" and (kernel_cache.is_built() or compiler_found() is not None):
+        if not kernel_cache.is_built():
+            message = "compiling the CPU rasterizer (first run only, about a minute)"
+            _compile_stage(progress, cancel, message, cpu_backend.load_kernel)
         return
+    if numba_backend.installed() and not numba_backend.is_compiled():
+        message = "compiling the CPU rasterizer with numba (no C++ compiler here; first run only, about a minute)"
+        _compile_stage(progress, cancel, message, numba_backend.warm_up)
+
+
+def _compile_stage(
+    progress: Callable[[Progress], None], cancel: Callable[[], bool], message: str, build: Callable[[], object]
+) -> None:
+    """Run ``build`` as the ``compile`` stage, telling ``message``."""
     tracker = Tracker(progress, cancel, {COMPILE_STAGE: 1.0}, what="compile")
     tracker.begin(COMPILE_STAGE)
-    tracker.tell(0, 1, "compiling the CPU rasterizer (first run only, about a minute)")
-    cpu_backend.load_kernel()
+    tracker.tell(0, 1, message)
+    build()
     tracker.end()
 
 

@@ -63,9 +63,17 @@ def machine_rows(state: machine.MachineState) -> list[tuple[str, str, str]]:
         ("Weights", shown, "ERROR" if weights.get("fallback") else "CHECKMARK"),
         ("Rasterizer", f"{info.get('rasterizer_label')} ({info.get('rasterizer_note')})", "CHECKMARK"),
         ("C++ Compiler", info.get("compiler") or "not found", "CHECKMARK" if info.get("compiler") else "ERROR"),
+        ("Numba", numba_text(info), "CHECKMARK" if info.get("numba") else "INFO"),
         ("CUDA", f"{cuda} (torch {info.get('torch')})", "CHECKMARK" if info.get("cuda") else "INFO"),
         ("Kernel Cache", f"{info.get('kernel_cache')} ({built})", "FILE_FOLDER"),
     ]
+
+
+def numba_text(info: dict) -> str:
+    """The Numba row: its version and whether the kernel is compiled, or that it is missing."""
+    if not info.get("numba"):
+        return "not installed (without a C++ compiler the slower portable rasterizer runs)"
+    return f"{info['numba']} (kernel {'compiled' if info.get('numba_compiled') else 'compiled at its first run'})"
 
 
 def weights_offer(state: machine.MachineState, online: bool) -> tuple[bool, str]:

@@ -698,6 +698,7 @@ def test_machine_check_runs_in_the_workers_python(fresh, tmp_path, monkeypatch):
     assert rows["Kernel Cache"].startswith(info["kernel_cache"]) and rows["C++ Compiler"] == (
         info["compiler"] or "not found"
     )
+    assert rows["Numba"].startswith(info["numba"] or "not installed")
     offer, advice = weights_offer(machine.current(), online=True)
     assert offer and "https://download.pytorch.org/models/vgg16-397923af.pth" in advice
     offer, advice = weights_offer(machine.current(), online=False)

@@ -1,4 +1,5 @@
-"""``info``: what a 3DGS file holds (count, SH degree, bounds, properties), as text or JSON."""
+"""``info``: what a 3DGS file holds (count, SH degree, bounds, properties), as text or JSON; without a file,
+what a run would use on this machine (the rasterizer and why, compiler, numba, weights)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from ...core.scene.files import COMPRESSED_PLY, FORMATS, PLY, detect_format, rea
 from ...core.scene.gaussians import GaussianScene
 from ...core.scene.inria import NORMAL_NAMES
 from ...core.scene.ply_header import read_ply_header
+from ..machine import machine_info
 from .args import scene_options
 
 ROBUST_QUANTILE = 0.98
@@ -24,17 +26,22 @@ def add_info_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     p = commands.add_parser(
         "info",
         parents=[debug, scene_options()],
-        help="format, count, SH degree, bounds and properties of a splat file",
+        help="format, count, SH degree, bounds and properties of a splat file; without one, this machine's rasterizer",
         description="Describe a 3D Gaussian Splatting file (PLY, compressed PLY, SOG, SPZ or .splat) and what its "
-        "format keeps.",
+        "format keeps. Without SCENE: what a run would use on this machine (which rasterizer runs and why, the C++ "
+        "compiler, numba, the feature weights).",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE")
+    p.add_argument("scene", type=Path, nargs="?", metavar="SCENE")
     p.add_argument("--json", action="store_true", help="print the description as JSON")
     p.set_defaults(run=cmd_info)
 
 
 def cmd_info(args: argparse.Namespace) -> None:
-    """Print what a PLY holds, as text or JSON."""
+    """Print what a PLY holds, or without one what this machine runs, as text or JSON."""
+    if args.scene is None:
+        info = machine_info()
+        print(json.dumps(info, indent=2) if args.json else _format_machine(info))
+        return
     require_input("scene", args.scene, folder=True)
     info = scene_info(args.scene, drop_invalid=args.drop_invalid)
     print(json.dumps(info, indent=2) if args.json else _format_info(info))
@@ -78,6 +85,22 @@ def _bounds(scene: GaussianScene, quantile: float) -> dict[str, list[float]] | N
         return None
     lo, hi = scene.bounds(quantile)
     return {"min": lo.double().tolist(), "max": hi.double().tolist()}
+
+
+def _format_machine(info: dict[str, Any]) -> str:
+    """The machine description as lines of text: the rasterizer and why first."""
+    weights = info["weights"]
+    numba = f"{info['numba']} (kernel {'compiled' if info['numba_compiled'] else 'not compiled yet'})"
+    return "\n".join(
+        [
+            f"rasterizer:   {info['rasterizer_label']} ({info['rasterizer_note']})",
+            f"C++ compiler: {info['compiler'] or 'not found'}",
+            f"numba:        {numba if info['numba'] else 'not installed'}",
+            f"kernel cache: {info['kernel_cache']} (C++ kernel {'built' if info['kernel_built'] else 'not built'})",
+            f"device:       {info['device']}, {info['threads']} threads, torch {info['torch']}",
+            f"weights:      {weights.get('weights_file') or weights.get('reason') or 'none found'}",
+        ]
+    )
 
 
 def _format_info(info: dict[str, Any]) -> str:

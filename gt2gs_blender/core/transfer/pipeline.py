@@ -22,6 +22,7 @@ from ..device import cpu_threads
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor, load_feature_extractor, mixed_precision_dtype
 from ..progress import ProgressCallback, Tracker
+from ..render import resolve_backend
 from ..scene.gaussians import GaussianScene
 from . import color_transfer
 from .bank import build_bank, nnfm_bank
@@ -311,7 +312,7 @@ def _report(
     bank: TextureBank,
     metrics: dict | None,
 ) -> dict:
-    """The run's report: timings, sizes, the device and network, the metrics, and the settings as asked
+    """The run's report: timings, sizes, the device, rasterizer and network, the metrics, and the settings as asked
     (``asked``) and as run (``config``, every automatic value resolved; ``resolved`` lists those)."""
     cameras = plan.cameras
     return {
@@ -321,6 +322,7 @@ def _report(
         "n_views": len(cameras),
         "image_size": [cameras[0].width, cameras[0].height],
         "device": str(plan.device),
+        "rasterizer": resolve_backend(plan.config.backend, plan.device),
         "weights": dict(extractor.info),
         "bank": {"features": len(bank), "scales": list(bank.scales), "angles": len(bank.angles)},
         "metrics": metrics,
