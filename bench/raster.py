@@ -9,12 +9,18 @@ pixels where no alpha rule sits on its threshold; it is measured where the refer
 
     python bench/raster.py --quick            # 10k@256, 50k@512, 200k@512, a few minutes
     python bench/raster.py --json out.json    # the full grid
+    python bench/raster.py --quick --interleaved   # the CPU backends alternately in one process: ratios
+
+``--interleaved`` times the CPU backends in this one process, one forward+backward of each in turn per
+repeat, and adds each one's median ratio to the first backend's time of the same repeat: on a loaded
+machine the ratios hold where the absolute times do not (peak memory is not measured there).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -151,6 +157,54 @@ def backend_devices() -> list[tuple[str, str]]:
     return [(b, d) for d in devices for b in available_backends(d)]
 
 
+def interleaved(backends: list[str], configs: list[tuple[int, int]], repeats: int, path: Path) -> int:
+    """Time ``backends`` alternately in this process (CPU); print medians and ratios to the first backend."""
+    import torch
+
+    from gt2gs_blender.core.render import rasterization
+
+    records = []
+    print(f"load {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores, {torch.get_num_threads()} threads")
+    print(f"{'backend':9} {'N':>9} {'res':>6} {'fwd ms':>9} {'fwd+bwd ms':>11} {'fwd ratio':>10} {'fwd+bwd ratio':>14}")
+    for n, res in configs:
+        params, viewmats, ks = make_scene(n, res)
+        params = [p.requires_grad_(True) for p in params]
+        times: dict[str, list[tuple[float, float]]] = {b: [] for b in backends}
+        for repeat in range(repeats + 1):  # the first round warms up (JIT, caches) and is not counted
+            for backend in backends:
+                for p in params:
+                    p.grad = None
+                t0 = time.perf_counter()
+                out = rasterization(*params, viewmats, ks, res, res, sh_degree=3, backend=backend)
+                t1 = time.perf_counter()
+                (out.colors.sum() + out.depths.sum() * 0.1 + out.alphas.sum()).backward()
+                if repeat:
+                    times[backend].append((t1 - t0, time.perf_counter() - t0))
+        first = times[backends[0]]
+        for backend in backends:
+            mine = times[backend]
+            rec = {
+                "backend": backend,
+                "n": n,
+                "width": res,
+                "fwd_ms": 1000 * statistics.median(t[0] for t in mine),
+                "fwd_bwd_ms": 1000 * statistics.median(t[1] for t in mine),
+                "fwd_ratio": statistics.median(t[0] / f[0] for t, f in zip(mine, first)),
+                "fwd_bwd_ratio": statistics.median(t[1] / f[1] for t, f in zip(mine, first)),
+                "load": os.getloadavg()[0],
+            }
+            records.append(rec)
+            print(
+                f"{backend:9} {n:>9,} {res:>4}² {rec['fwd_ms']:9.1f} {rec['fwd_bwd_ms']:11.1f} "
+                f"{rec['fwd_ratio']:10.2f} {rec['fwd_bwd_ratio']:14.2f}",
+                flush=True,
+            )
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(records, indent=1))
+    print(f"wrote {path}")
+    return 0
+
+
 def fmt(v, spec: str) -> str:
     return "—" if v is None else format(v, spec)
 
@@ -158,9 +212,10 @@ def fmt(v, spec: str) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="10k@256, 50k@512 and 200k@512 only")
-    parser.add_argument("--json", type=Path, default=ROOT / "bench" / "out" / "raster.json")
+    parser.add_argument("--json", type=Path, help="default bench/out/raster.json (raster_interleaved.json)")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--backends", default=None, help="comma-separated subset of the available backends")
+    parser.add_argument("--interleaved", action="store_true", help="CPU backends alternately in one process")
     parser.add_argument("--one", nargs=4, metavar=("BACKEND", "DEVICE", "N", "RES"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.one:
@@ -172,6 +227,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.backends:
         runs = [(b, d) for b, d in runs if b in args.backends.split(",")]
     configs = QUICK if args.quick else [(n, r) for n in FULL_N for r in FULL_RES]
+    if args.interleaved:
+        path = args.json or ROOT / "bench" / "out" / "raster_interleaved.json"
+        return interleaved([b for b, d in runs if d == "cpu"], configs, args.repeats, path)
+    args.json = args.json or ROOT / "bench" / "out" / "raster.json"
     records, too_slow = [], {}
     print(f"{'backend':13} {'N':>9} {'res':>6} {'fwd ms':>9} {'fwd+bwd ms':>11} {'peak MiB':>9} {'max err':>9}")
     for n, res in configs:
