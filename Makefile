@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-blender52 test-gui lint build bench venv clean
+.PHONY: demo test test-blender52 test-numpy2 test-gui lint build bench venv clean
 
 venv: $(STAMP)
 
@@ -28,6 +28,16 @@ $(STAMP313): requirements-py313.txt
 	$(VENV313)/bin/python -m pip install --quiet -r requirements-py313.txt
 	touch $(STAMP313)
 
+# The engine on numpy 2 (what Blender 5.1/5.2's dependencies install), with .venv's Python and torch.
+VENVNP2 := .venv-numpy2
+STAMPNP2 := $(VENVNP2)/.installed
+
+$(STAMPNP2): requirements-numpy2.txt
+	$(PYTHON) -m venv $(VENVNP2)
+	$(VENVNP2)/bin/python -m pip install --quiet --upgrade pip
+	$(VENVNP2)/bin/python -m pip install --quiet -r requirements-numpy2.txt
+	touch $(STAMPNP2)
+
 # splat-transform (npm, package.json): the tests' oracle for the splat formats; without npm they skip and say so.
 NODE_STAMP := node_modules/.installed
 $(NODE_STAMP): package.json package-lock.json
@@ -40,12 +50,20 @@ demo: $(STAMP)
 test: $(STAMP) $(NODE_STAMP) lint
 	GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} $(PY) -m pytest -q
 	$(MAKE) test-blender52
+	$(MAKE) test-numpy2
 
 # The Blender edge (tests/blender) and the numpy-only readers on bpy 5.2.3 / Python 3.13 / numpy 2. The worker
 # and the machine check run on .venv's Python (torch), as an artist's would on the installed dependencies.
 test-blender52: $(STAMP) $(STAMP313) $(NODE_STAMP)
 	GT2GS_WORKER_PYTHON=$(abspath $(PY)) GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} \
 	  $(VENV313)/bin/python -m pytest -q tests/blender tests/test_fuzz_readers.py
+
+# The engine's numpy parts and a transfer on numpy 2: every splat format, the scene, the worker, the transfer and
+# the cameras (about 4 minutes).
+test-numpy2: $(STAMPNP2) $(NODE_STAMP)
+	GT2GS_WEIGHTS_DIR=$${GT2GS_WEIGHTS_DIR:-$(abspath ../shared/weights)} $(VENVNP2)/bin/python -m pytest -q \
+	  tests/test_ply.py tests/test_splat_files.py tests/test_sog.py tests/test_spz.py tests/test_compressed_ply.py \
+	  tests/test_scene.py tests/test_worker.py tests/test_transfer.py tests/test_cameras.py
 
 # A real Blender window: Debian sid's blender (5.2.2, Python 3.14) in a debootstrap chroot under Xvfb runs
 # tests/gui/smoke.py on the built zip and checks what it found. Not part of make test: it needs root and a Debian
@@ -70,4 +88,4 @@ bench: $(STAMP)
 	$(PY) bench/raster.py --quick
 
 clean:
-	rm -rf $(VENV) $(VENV313) dist bench/out .pytest_cache
+	rm -rf $(VENV) $(VENV313) $(VENVNP2) dist bench/out .pytest_cache
