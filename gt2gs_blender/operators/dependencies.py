@@ -7,7 +7,7 @@ when Blender allows online access (the manifest declares the network permission)
 
 from __future__ import annotations
 
-import importlib.util
+import importlib.metadata
 import subprocess
 import sys
 import tempfile
@@ -23,7 +23,9 @@ POLL_S = 0.5
 
 def install_commands(build: str, target: str) -> list[list[str]]:
     """The commands this button runs with Blender's Python: ensurepip when pip is absent, then pip install."""
-    bootstrap = [[sys.executable, "-m", "ensurepip", "--upgrade"]] if importlib.util.find_spec("pip") is None else []
+    # pip's metadata, not find_spec("pip"): that makes setuptools' distutils hook stand down for the whole process
+    has_pip = next(iter(importlib.metadata.distributions(name="pip")), None) is not None
+    bootstrap = [] if has_pip else [[sys.executable, "-m", "ensurepip", "--upgrade"]]
     return [*bootstrap, deps.install_command(sys.executable, target, build)]
 
 
