@@ -93,3 +93,17 @@ def test_a_ground_patch_under_an_object_says_which_way_is_up() -> None:
     points = np.concatenate([ground, robot])
     np.testing.assert_array_equal(estimate_up_axis(points), [0.0, -1.0, 0.0])
     np.testing.assert_array_equal(estimate_up_axis(points * [1.0, -1.0, 1.0]), [0.0, 1.0, 0.0])
+
+
+def test_the_run_plan_reports_the_up_axis_it_found(guitar: GaussianScene) -> None:
+    """A plan with ``up`` auto and automatic views resolves it to the axis found (the guitar's -Y), for the report;
+    given cameras keep it as asked (they need none)."""
+    from gt2gs_blender.core.api import preset
+    from gt2gs_blender.core.transfer.plan import plan_run
+
+    texture = np.full((32, 32, 3), 0.5, np.float32)
+    config = preset("preview", n_views=2, resolution=32, layout=False, texture_repeats=0.0)
+    plan = plan_run(guitar, texture, None, config, preview=True)
+    assert plan.asked.up == "auto" and plan.resolved()["up"] == "-y"
+    given = plan_run(guitar, texture, plan.cameras, config, preview=True)
+    assert given.resolved()["up"] == "auto"

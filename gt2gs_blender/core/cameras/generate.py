@@ -278,6 +278,22 @@ def front_for(up: Sequence[float]) -> np.ndarray:
     return np.array([0.0, -sign, 0.0]) if world == 2 else np.array([0.0, 0.0, sign])
 
 
+def scene_up(scene: GaussianScene, quantile: float = 0.98) -> np.ndarray:
+    """:func:`estimate_up_axis` of the splat centres inside the scene's robust bounds (floaters left out)."""
+    lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
+    means = scene.means.detach().double().cpu().numpy()
+    return estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
+
+
+def axis_name(vector: Sequence[float]) -> str | None:
+    """The signed world axis ``vector`` is ('+z', '-y', ...), or None when it is none of them."""
+    v = np.asarray(vector, dtype=np.float64)
+    world = int(np.argmax(np.abs(v)))
+    if abs(v[world]) != 1.0 or np.count_nonzero(v) != 1:
+        return None
+    return ("+" if v[world] > 0 else "-") + "xyz"[world]
+
+
 def axis_vector(name: str) -> tuple[float, float, float]:
     """The unit vector of an axis named by an optional sign and x, y or z ('+z', '-y', 'x')."""
     sign, letter = (name[0], name[1:]) if name[:1] in "+-" else ("+", name)
@@ -319,8 +335,7 @@ def auto_views(
     center = (lo + hi) / 2.0
     sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
     if up == "auto":
-        means = scene.means.detach().double().cpu().numpy()
-        up = estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
+        up = scene_up(scene, quantile)
     elif isinstance(up, str):
         up = axis_vector(up)
     front = front_for(up)

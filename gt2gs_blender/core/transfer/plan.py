@@ -3,8 +3,9 @@
 :func:`plan_run` makes it from the scene, the texture, the views, the settings and the region. The run
 (``pipeline``), the orientation preview (CLI, API and Blender's worker) and the report read it, so
 nothing is derived twice and no setting is replaced mid-run. ``asked`` is the config as given; ``config``
-is the same with every automatic value resolved: the texture height ``texture_repeats`` implies, the
-layout's projection, whether the texture moves the splats, and the bank's depth ratio.
+is the same with every automatic value resolved: the up axis of automatic views, the texture height
+``texture_repeats`` implies, the layout's projection, whether the texture moves the splats, and the bank's depth
+ratio.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 import torch
 
 from ..cameras.camera import Camera
+from ..cameras.generate import axis_name, scene_up
 from ..device import resolve_device
 from ..scene.gaussians import GaussianScene
 from .bank import bank_depth_ratio
@@ -31,7 +33,7 @@ from .stylise import moves_splats
 from .texture import load_texture
 from .views import ViewSet, fit_cameras
 
-RESOLVED = ("texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
+RESOLVED = ("up", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
 """The settings a plan resolves from the scene and its views (the report shows them beside what was asked)."""
 
 
@@ -94,7 +96,10 @@ def plan_run(
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
     framed = original if selected is None else original.subset(selected)
-    cameras = fit_cameras(framed, views, config.resolution, config.n_views, config.up)
+    up = config.up
+    if up == "auto" and (views is None or isinstance(views, int)):
+        up = axis_name(scene_up(framed)) or up
+    cameras = fit_cameras(framed, views, config.resolution, config.n_views, up)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     start = stylise_start(original, selected, config.stylised_sh_degree)
     content = hidden = frame = None
@@ -107,7 +112,7 @@ def plan_run(
             # sized on every selected splat, hidden ones too
             frame = layout_frame(framed, content, config)
     used = None if content is None else content.subset([v for v in range(len(cameras)) if v not in dropped])
-    resolved = _resolve(config, cameras, content, used, frame)
+    resolved = replace(_resolve(config, cameras, content, used, frame), up=up)
     return RunPlan(
         asked=config,
         config=resolved,
