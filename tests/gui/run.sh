@@ -32,7 +32,8 @@ mkdir -p "$OUT"
 
 mounts=()
 cleanup() {
-  [ -n "${XVFB:-}" ] && kill "$XVFB" 2>/dev/null || true
+  # $! is the subshell running in_chroot, not Xvfb: its own lock file names it.
+  [ -f "$CHROOT/tmp/.X99-lock" ] && kill "$(tr -d ' ' <"$CHROOT/tmp/.X99-lock")" 2>/dev/null || true
   for ((i = ${#mounts[@]} - 1; i >= 0; i--)); do umount "${mounts[$i]}" 2>/dev/null || true; done
 }
 trap cleanup EXIT
@@ -49,7 +50,6 @@ in_chroot() {
     GT2GS_WORKER_PYTHON="$PY" GT2GS_WEIGHTS_DIR="$WORK/shared/weights" "$@"
 }
 in_chroot Xvfb :99 -screen 0 1600x900x24 -nolisten tcp >"$OUT/xvfb.log" 2>&1 &
-XVFB=$!
 sleep 3
 in_chroot blender --command extension install-file -r user_default -e "$ZIP" >"$OUT/install.log" 2>&1
 # A file given on the command line opens without the splash screen over the view: the default scene, no cube.
