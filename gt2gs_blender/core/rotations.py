@@ -4,6 +4,8 @@ differentiable twin is ``scene.gaussians.quats_to_rotmats``)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 DEGENERATE_NORM = 1e-12
@@ -17,17 +19,20 @@ def quats_to_matrices(quats: np.ndarray) -> np.ndarray:
     ok = norm > DEGENERATE_NORM
     q = np.where(ok, q / np.where(ok, norm, 1.0), np.array([1.0, 0.0, 0.0, 0.0]))
     w, x, y, z = np.moveaxis(q, -1, 0)
-    return np.stack(
-        [
-            1 - 2 * (y * y + z * z),
-            2 * (x * y - w * z),
-            2 * (x * z + w * y),
-            2 * (x * y + w * z),
-            1 - 2 * (x * x + z * z),
-            2 * (y * z - w * x),
-            2 * (x * z - w * y),
-            2 * (y * z + w * x),
-            1 - 2 * (x * x + y * y),
-        ],
-        axis=-1,
-    ).reshape((*q.shape[:-1], 3, 3))
+    return np.stack(rotation_entries(w, x, y, z), axis=-1).reshape((*q.shape[:-1], 3, 3))
+
+
+def rotation_entries(w: Any, x: Any, y: Any, z: Any) -> tuple[Any, ...]:
+    """The nine entries, row by row, of the rotation of the unit quaternion (w, x, y, z): plain arithmetic, so
+    numpy arrays, Python floats and the numba kernel (``render.numba_kernel``) share this one formula."""
+    return (
+        1 - 2 * (y * y + z * z),
+        2 * (x * y - w * z),
+        2 * (x * z + w * y),
+        2 * (x * y + w * z),
+        1 - 2 * (x * x + z * z),
+        2 * (y * z - w * x),
+        2 * (x * z - w * y),
+        2 * (y * z + w * x),
+        1 - 2 * (x * x + y * y),
+    )

@@ -17,6 +17,9 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..rotations import rotation_entries
+from ..scene.inria import SH_C0, SH_C1, SH_C2, SH_C3
+
 TILE = 8
 MAX_CHANNELS = 32
 EPS2D = 0.3
@@ -24,18 +27,6 @@ FOV_CLAMP = 1.3
 ALPHA_MIN = 1.0 / 255.0
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
-SH_C0 = 0.28209479177387814
-SH_C1 = 0.4886025119029199
-SH_C2 = (1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792, 0.5462742152960396)
-SH_C3 = (
-    -0.5900435899266435,
-    2.890611442640554,
-    -0.4570457994644658,
-    0.3731763325901154,
-    -0.4570457994644658,
-    1.445305721320277,
-    -0.5900435899266435,
-)
 UNITS_PER_THREAD = 8
 """Forward work units per thread: tiles are dealt round-robin to units, which balances busy image centres."""
 JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -497,6 +488,9 @@ def _camera(viewmat, k, width, height):
     return r, t, fx, fy, cx, cy, centre, lims
 
 
+_rotation_entries = njit(**JIT)(rotation_entries)
+
+
 @njit(**JIT)
 def _rotation(qw, qx, qy, qz):
     """(normalised quaternion (4-tuple), its norm, whether it is non-zero, rotation matrix (9-tuple))."""
@@ -506,18 +500,7 @@ def _rotation(qw, qx, qy, qz):
         w, x, y, z = qw / norm, qx / norm, qy / norm, qz / norm
     else:
         w, x, y, z = 1.0, 0.0, 0.0, 0.0
-    m = (
-        1 - 2 * (y * y + z * z),
-        2 * (x * y - w * z),
-        2 * (x * z + w * y),
-        2 * (x * y + w * z),
-        1 - 2 * (x * x + z * z),
-        2 * (y * z - w * x),
-        2 * (x * z - w * y),
-        2 * (y * z + w * x),
-        1 - 2 * (x * x + y * y),
-    )
-    return (w, x, y, z), norm, ok, m
+    return (w, x, y, z), norm, ok, _rotation_entries(w, x, y, z)
 
 
 @njit(**JIT)
