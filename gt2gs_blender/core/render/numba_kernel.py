@@ -230,11 +230,7 @@ def sweep(
                 continue
             cam, x0, y0, last_x, last_y = _tile_origin(tile, tiles_x, tiles_y, width, height)
             _gather(m2, cn, op, log_min, half, pg, begin, end, y0, last_y, sp, rows)
-            for i in range(TILE):
-                fx[i] = x0 + i
-                fx[i] += hlf
-                fy[i] = y0 + i
-                fy[i] += hlf
+            _pixel_centres(x0, y0, hlf, fx, fy)
             rows_live = last_y + 1
             for r in range(TILE):
                 row_live[r] = r <= last_y
@@ -353,11 +349,7 @@ def backward(
                     continue
                 cam, x0, y0, last_x, last_y = _tile_origin(tile, tiles_x, tiles_y, width, height)
                 _gather(m2, cn, op, log_min, half, pg, begin, end, y0, last_y, sp, rows)
-                for i in range(TILE):
-                    fx[i] = x0 + i
-                    fx[i] += hlf
-                    fy[i] = y0 + i
-                    fy[i] += hlf
+                _pixel_centres(x0, y0, hlf, fx, fy)
                 last = begin
                 for r in range(TILE):
                     row_end[r] = begin
@@ -489,6 +481,17 @@ def _camera(viewmat, k, width, height):
 
 
 _rotation_entries = njit(**JIT)(rotation_entries)
+
+
+@njit(**JIT)
+def _pixel_centres(x0, y0, hlf, fx, fy):
+    """A tile's pixel centres along x and y into ``fx``/``fy`` (the integer, then the half added in the buffer's
+    float type, as the C++ kernel rounds them)."""
+    for i in range(TILE):
+        fx[i] = x0 + i
+        fx[i] += hlf
+        fy[i] = y0 + i
+        fy[i] += hlf
 
 
 @njit(**JIT)
