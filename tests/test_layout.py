@@ -401,7 +401,7 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, keep_scene=keep, shade_softness=0.0)
+    config = zero_step_config(shared, tmp_path, keep_scene=keep, scene_colour=0.0, shade_softness=0.0)
     result = transfer(scene, white, [cam], config)
     colours = result.scene.base_colors.mean(1)
     on_left = result.scene.means[:, 0] < -0.1
@@ -431,7 +431,9 @@ def test_a_whole_run_keeps_the_two_tones_of_the_scene_under_a_flat_texture(share
 
     scene, cam, _ = half_dark_wall()
     grey = np.full((64, 64, 3), 0.5, np.float32)
-    config = wall_config(shared, tmp_path, stylise_steps=12, correct_steps=4, keep_scene=keep, background=(0, 0, 0))
+    config = wall_config(
+        shared, tmp_path, stylise_steps=12, correct_steps=4, keep_scene=keep, scene_colour=0.0, background=(0, 0, 0)
+    )
     result = transfer(scene, grey, [cam], config)
     shown = render(result.scene, [cam], background=torch.zeros(3)).colors[0].mean(-1)
     left, right = shown[16:80, 8 : 48 - 8].mean(), shown[16:80, 48 + 8 : 96 - 8].mean()
@@ -448,7 +450,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, shade_softness=0.1)
+    config = zero_step_config(shared, tmp_path, scene_colour=0.0, shade_softness=0.1)
     result = transfer(scene, white, [cam], config)
     colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
     dark, seam = 0.2 / 0.8, 0.5 / 0.8
@@ -468,6 +470,60 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     assert float(row[middle - 1 : middle + 1].mean()) == pytest.approx(seam, abs=0.04)
     assert float(row[int(cam.cx - 0.4 * cam.fx / 3.0) - 3]) == pytest.approx(dark, abs=0.03)
     assert float(row[round(cam.cx - 0.1 * cam.fx / 3.0)]) == pytest.approx(one_width, abs=0.04)
+
+
+PINK, BLUE = (0.9, 0.5, 0.5), (0.4, 0.6, 0.9)
+"""Two hues of nearly one luminance (0.585 and 0.579): a donut's icing and dough to the luminance alone."""
+
+
+def two_hue_wall() -> tuple[GaussianScene, Camera]:
+    """The wall pink on its left half and blue on its right, its front camera."""
+    base, cam = wall(n=80), front_camera(96)
+    left = base.means[:, 0] < 0
+    colours = torch.where(left[:, None], torch.tensor(PINK).expand(len(base), 3), torch.tensor(BLUE))
+    return with_colours(base, colours), cam
+
+
+@pytest.mark.parametrize("colour", [0.3, 1.0, 0.0])
+def test_scene_colour_mixes_each_part_s_own_colour_under_the_texture(shared, tmp_path, colour):
+    """A mid-grey texture on the two-hue wall at Keep Scene 1 and Scene Colour ``colour``: each half comes out
+    exactly (1 - colour) x grey x its shade (its luminance over the brighter half's) + colour x its own colour,
+    on the splats, in the preview and in the layout term's image (0: both halves grey, as the luminance keeps
+    them alike; 1: the scene's colours back, no texture)."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+
+    scene, cam = two_hue_wall()
+    grey = np.full((64, 64, 3), 0.5, np.float32)
+    config = zero_step_config(shared, tmp_path, keep_scene=1.0, scene_colour=colour, shade_softness=0.0)
+    result = transfer(scene, grey, [cam], config)
+    luma = np.array([0.2126, 0.7152, 0.0722])
+    bright = max(float(np.dot(PINK, luma)), float(np.dot(BLUE, luma)))
+    for hue, side in ((PINK, result.scene.means[:, 0] < -0.1), (BLUE, result.scene.means[:, 0] > 0.1)):
+        expected = (1.0 - colour) * 0.5 * float(np.dot(hue, luma)) / bright + colour * np.array(hue)
+        assert result.scene.base_colors[side].mean(0).numpy() == pytest.approx(expected, abs=0.01)
+    expected_image = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(preview(scene, grey, [cam], config, size=96).image.astype(np.float32) - expected_image).max() <= 1.0
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    (ideal,) = layout_images(views, grey, layout_frame(scene, views, config), 0.0, True, keep=1.0, colour=colour)
+    left = (1.0 - colour) * 0.5 * float(np.dot(PINK, luma)) / bright + colour * np.array(PINK)
+    covered = ideal[:, : 96 // 2 - 6, 3] > 0  # the wall's left half on screen, away from the seam
+    assert ideal[:, : 96 // 2 - 6, :3][covered].mean(0).numpy() == pytest.approx(left, abs=0.02)
+
+
+@pytest.mark.parametrize("colour", [0.3, 0.0])
+def test_a_whole_run_keeps_parts_that_differ_only_in_hue_apart(shared, tmp_path, colour):
+    """The two-hue wall under a flat grey texture, a whole short run with every default of the method: at Scene
+    Colour 0.3 the halves stay apart by 0.3 of their colours' difference (within 0.05 a channel), at 0 they
+    come out alike (Keep Scene keeps luminance, and theirs is nearly one)."""
+    from gt2gs_blender.core.api import transfer
+
+    scene, cam = two_hue_wall()
+    grey = np.full((64, 64, 3), 0.5, np.float32)
+    config = wall_config(shared, tmp_path, stylise_steps=12, correct_steps=4, scene_colour=colour, background=(0, 0, 0))
+    shown = render(transfer(scene, grey, [cam], config).scene, [cam], background=torch.zeros(3)).colors[0]
+    difference = (shown[16:80, 8 : 48 - 8].mean((0, 1)) - shown[16:80, 48 + 8 : 96 - 8].mean((0, 1))).numpy()
+    assert difference == pytest.approx(colour * (np.array(PINK) - np.array(BLUE)), abs=0.05)
 
 
 def test_spatial_blur_is_a_gaussian_weighted_average_of_the_neighbours():

@@ -20,6 +20,7 @@ import bpy
 
 from ..blender import machine, textures, transfer_run, views
 from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
+from ..core.transfer.layout import keeps_scene
 from ..core.transfer.setting import IN_SCENE, PARTS
 from .sidebar import CATEGORY, LABEL_CHARS, text_lines
 
@@ -36,12 +37,11 @@ SECTION_OF_PART = {
 }
 """Which sub-panel shows the settings of each part of the method."""
 FRONT = {
-    "Texture": ("angle", "texture_repeats", "keep_scene"),
+    "Texture": ("angle", "texture_repeats", "keep_scene", "scene_colour"),
     "Views": ("n_views",),
     "Quality": ("lambda_content",),
 }
-"""Settings a sub-panel shows first, beside its own front-end properties (those the config has; ``keep_scene``
-shows once the config has it)."""
+"""Settings a sub-panel shows first, beside its own front-end properties (those the config has)."""
 OPEN = ("Texture", "Views")
 """Sub-panels open in a new file; the others start closed."""
 
@@ -105,7 +105,8 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "texture_height": lambda s: s.texture_repeats == 0,
     "layout_projection": lambda s: s.layout,
     "keep_scene": lambda s: s.layout,
-    "shade_softness": lambda s: s.layout and s.keep_scene > 0,
+    "scene_colour": lambda s: s.layout,
+    "shade_softness": lambda s: s.layout and keeps_scene(s),
     "split_size": lambda s: s.layout,
     "split_first": lambda s: s.layout and s.split_size > 0,
     "split_budget": lambda s: s.layout and s.split_size > 0,

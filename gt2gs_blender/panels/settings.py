@@ -36,6 +36,7 @@ PREVIEWED = (
     "layout",
     "layout_projection",
     "keep_scene",
+    "scene_colour",
     "shade_softness",
     "texture_repeats",
     "split_size",

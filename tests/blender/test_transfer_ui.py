@@ -552,9 +552,8 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
     listed = [name for s in sections.SECTIONS for _, names in sections.section_settings(s) for name in names]
     listed += [name for section in sections.SECTIONS for name in sections.front_settings(section)]
     assert sorted(listed) == sorted(name for name, _, _ in user_settings(IN_SCENE))  # each exactly once
-    # Texture: what an artist sets (Keep Scene once the config has it); the method's texture settings: Advanced
-    keep = [name for name, _, _ in user_settings(IN_SCENE) if name == "keep_scene"]
-    assert sections.front_settings("Texture") == ["angle", "texture_repeats", *keep]
+    # Texture: what an artist sets (what the texture keeps of the scene); the method's texture settings: Advanced
+    assert sections.front_settings("Texture") == ["angle", "texture_repeats", "keep_scene", "scene_colour"]
     assert sections.section_settings("Texture") == []
     assert {"texture", "gt2"} <= set(dict(sections.section_settings("Advanced")))  # by part: new ones join
     labels = [cls.bl_label for cls in sections.classes]
@@ -621,7 +620,7 @@ def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
 
 def test_settings_a_run_ignores_are_greyed_out(fresh):
     """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on,
-    Scene Softness only while Keep Scene is above 0."""
+    Scene Softness only while Keep Scene or Scene Colour is above 0."""
     from gt2gs_blender.panels.sections import USED_WHEN, setting_used
 
     settings = fresh.context.scene.gt2gs
@@ -630,6 +629,8 @@ def test_settings_a_run_ignores_are_greyed_out(fresh):
     assert not setting_used(settings, "texture_height") and setting_used(settings, "split_size")
     assert setting_used(settings, "shade_softness")
     settings.keep_scene = 0.0
+    assert setting_used(settings, "shade_softness")  # the colour it keeps is still averaged over it
+    settings.scene_colour = 0.0
     assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_scene")
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")

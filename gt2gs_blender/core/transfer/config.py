@@ -104,6 +104,17 @@ class TransferConfig(MachineSettings):
         min=0.0,
         max=1.0,
     )
+    scene_colour: float = setting(
+        0.3,
+        "Scene Colour",
+        "How much of the capture's own colour shows under the laid-out texture: 0 colours it with the "
+        "texture alone; 0.3 mixes in 30 % of each spot's own colour, so parts that differ only in hue "
+        "(pink icing on beige dough, a robot's eyes) stay apart and the capture reads at a glance; 1 keeps "
+        "the capture's colours with no texture",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
     shade_softness: float = setting(
         0.0,
         "Scene Softness",

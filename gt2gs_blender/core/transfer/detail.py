@@ -22,6 +22,7 @@ from ..scene.gaussians import GaussianScene, concat, quats_to_rotmats
 from ..scene.inria import SH_C0
 from .config import TransferConfig
 from .layout import LayoutFrame, layout_colours, splat_normals
+from .shade import under_scene
 from .views import ViewSet
 
 SPLIT_OFFSET = 0.8
@@ -118,15 +119,15 @@ def add_detail(
     shade: torch.Tensor | None = None,
 ) -> tuple[GaussianScene, torch.Tensor | None]:
     """The optimised ``scene`` at the texture's detail: ``rows`` (all when None) split where coarser
-    than ``split_size`` repeats, each child coloured by the layout at its own place times its parent's
-    ``shade`` (as :func:`lay_out` laid it) plus what the optimisation changed on its parent (its colour
+    than ``split_size`` repeats, each child coloured by the layout at its own place over its parent's kept
+    scene ``shade`` (as :func:`lay_out` laid it) plus what the optimisation changed on its parent (its colour
     minus ``start_colours``). The split rows move to the end; returns the scene and the new rows mask."""
     part = scene if rows is None else scene.subset(rows)
     change = part.base_colors - (start_colours if rows is None else start_colours[rows]).to(part.sh_dc)
     fine, source = split_coarse(part, config.split_size * frame.repeat, split_limit(len(part), config))
     colours = layout_colours(fine, splat_normals(fine, views, frame), texture, frame, config.angle)
     if shade is not None:
-        colours = colours * (shade if rows is None else shade[rows])[source, None].to(colours)
+        colours = under_scene(colours, (shade if rows is None else shade[rows])[source])
     colours = colours + change[source]
     fine = replace(fine, sh_dc=((colours.clamp(0.0, 1.0) - 0.5) / SH_C0).to(fine.sh_dc))
     return _rejoin(scene, rows, fine)

@@ -54,7 +54,7 @@ from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig
 from .metrics import LUMA
 from .setting import Projection
-from .shade import layout_shade, shading, spatial_blur
+from .shade import kept_scene, layout_shade, shading, spatial_blur, under_scene
 from .texture_bank import bank_scales, screen_rotation
 from .views import ViewSet
 
@@ -274,13 +274,14 @@ def layout_images(
     shaded: bool = False,
     softness: float = 0.0,
     keep: float = 1.0,
+    colour: float = 0.0,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
-    ``shaded``: times the view's own light and shade (:func:`shading` of its luminance to the power ``keep``,
-    averaged over the surface points within about ``softness``, a world length, by :func:`spatial_blur`), as
-    the layout lays it."""
+    ``shaded``: over the view's own scene as the layout lays it (:func:`under_scene`): its colour averaged over
+    the surface points within about ``softness`` (a world length, by :func:`spatial_blur`), the texture times
+    that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in."""
     images = []
     for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -291,9 +292,11 @@ def layout_images(
         colours = project_texture(points, normal[covered].float(), texture, frame, angle_deg, pixel)
         if shaded:
             weight = alpha.cpu()[covered].float()
-            seen = (premultiplied.cpu()[covered].float() @ torch.tensor(LUMA)) / weight
-            seen = spatial_blur(points, seen, weight, softness)  # the same average as the splats' shade
-            colours = colours * shading(seen, keep=keep)[:, None].to(colours)
+            seen = (premultiplied.cpu()[covered].float() / weight[:, None]).clamp(0.0, 1.0)
+            if softness > 0:  # the same average as the splats' shade
+                seen = torch.stack([spatial_blur(points, seen[:, c], weight, softness) for c in range(3)], dim=1)
+            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep), seen, colour)
+            colours = under_scene(colours, kept)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
         images.append(image.to(depth.device))
@@ -386,12 +389,12 @@ def lay_out(
     config: TransferConfig,
     shade: torch.Tensor | None = None,
 ) -> GaussianScene:
-    """``scene`` with the texture laid on ``rows`` (all when None) in ``frame``, times each splat's ``shade``
-    (:func:`layout_shade`; None: the texture's own colours): what the optimisation starts from."""
+    """``scene`` with the texture laid on ``rows`` (all when None) in ``frame``, over the scene each splat keeps
+    (``shade``, :func:`layout_shade`; None: the texture's own colours): what the optimisation starts from."""
     part = scene if rows is None else scene.subset(rows)
     colours = layout_colours(part, splat_normals(part, views, frame), texture, frame, config.angle)
     if shade is not None:
-        colours = colours * (shade if rows is None else shade[rows])[:, None].to(colours)
+        colours = under_scene(colours, shade if rows is None else shade[rows])
     laid = with_colours(part, colours)
     if rows is None:
         return laid
@@ -406,11 +409,16 @@ def lay_out(
 def layout_shading(
     scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig
 ) -> torch.Tensor | None:
-    """The shade a run with ``config`` lays the texture with (:func:`layout_shade`, ``shade_softness``
-    repeats of ``frame``, ``keep_scene``), or None when it keeps the texture's own colours (``keep_scene`` 0)."""
-    if config.keep_scene <= 0:
+    """What of the scene a run with ``config`` lays the texture over (:func:`layout_shade`, ``shade_softness``
+    repeats of ``frame``, ``keep_scene``, ``scene_colour``), or None when it keeps the texture's own colours."""
+    if not keeps_scene(config):
         return None
-    return layout_shade(scene, rows, shade_width(frame, config), config.keep_scene)
+    return layout_shade(scene, rows, shade_width(frame, config), config.keep_scene, config.scene_colour)
+
+
+def keeps_scene(config: TransferConfig) -> bool:
+    """Whether the laid-out texture keeps anything of the scene under it (its light and dark, or its colour)."""
+    return config.keep_scene > 0 or config.scene_colour > 0
 
 
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:

@@ -32,7 +32,7 @@ from .layout import lay_out, layout_shading
 from .metrics import LUMA
 from .plan import RunPlan, plan_run
 from .region import assemble
-from .shade import shading
+from .shade import kept_scene, shading, under_scene
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio, screen_rotation
 
@@ -65,9 +65,11 @@ def orientation_preview(
     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
     backend: str = "auto",
     keep: float = 1.0,
+    colour: float = 0.0,
 ) -> np.ndarray:
-    """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``, the texture shaded by the
-    scene's luminance to the power ``keep`` (the run's ``keep_scene``).
+    """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``, the texture over the scene as
+    the layout lays it (:func:`under_scene`): shaded by the scene's luminance to the power ``keep`` (the run's
+    ``keep_scene``), with ``colour`` of the scene's own colour mixed in (its ``scene_colour``).
 
     ``resolution`` and ``texture_height`` are the transfer's settings: the texture appears as large
     on screen as the transfer's texture bank makes it (its nearest scale spans
@@ -82,9 +84,11 @@ def orientation_preview(
     alpha = alpha.cpu().numpy()
     covered = groups >= 0
 
-    colour = premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]
-    luminance = torch.from_numpy(colour @ np.array(LUMA, np.float32))
-    shade = shading(luminance, luminance[torch.from_numpy(covered)], keep).numpy()
+    seen = torch.from_numpy(premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]).clamp(0.0, 1.0)
+    luminance = seen @ torch.tensor(LUMA)
+    kept = kept_scene(
+        shading(luminance, luminance[torch.from_numpy(covered)], keep).reshape(-1), seen.reshape(-1, 3), colour
+    )
 
     nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
     laid = np.zeros((cam.height, cam.width, 3), np.float32)
@@ -95,7 +99,8 @@ def orientation_preview(
         if mask.any():
             laid[mask] = texture_layer(image, angle_deg, nearest_px * factor, cam.width, cam.height)[mask]
     cover = np.where(covered, alpha, 0.0)[..., None]
-    result = laid * shade[..., None] * cover + np.asarray(background, np.float32) * (1.0 - cover)
+    laid = under_scene(torch.from_numpy(laid).reshape(-1, 3), kept).reshape(laid.shape).numpy()
+    result = laid * cover + np.asarray(background, np.float32) * (1.0 - cover)
     return (np.clip(result, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 
@@ -148,6 +153,7 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
         background=config.background,
         backend=config.backend,
         keep=config.keep_scene,
+        colour=config.scene_colour,
     )
     return Preview(image, len(plan.original))
 

@@ -29,7 +29,7 @@ from .bank import build_bank, nnfm_bank
 from .config import TransferConfig
 from .content import content_degree
 from .detail import add_detail, split_for_detail
-from .layout import lay_out, layout_images, layout_shading, shade_width
+from .layout import keeps_scene, lay_out, layout_images, layout_shading, shade_width
 from .metrics import COVERED, preview_ssim
 from .orientation_preview import show
 from .plan import RunPlan, plan_run
@@ -155,7 +155,7 @@ def keeps_scene_tones(config: TransferConfig) -> bool:
     scene (Keep Scene above 0) the texture's palette is already laid on it, and the closing colour transfer would
     squeeze the capture's light and dark into the texture's spread (the guitar's black stand came out light wood:
     object SSIM 0.47 with it, 0.62 without, the texture match no worse)."""
-    return config.layout and config.keep_scene > 0
+    return config.layout and keeps_scene(config)
 
 
 def _transfer(
@@ -194,7 +194,9 @@ def _transfer(
     targets = view_targets(plan.used, work, extractor, config, config.backend)
     if frame is not None and config.layout and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
-        ideal = layout_images(plan.used, image, frame, config.angle, shaded, width, config.keep_scene)
+        ideal = layout_images(
+            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour
+        )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()
 

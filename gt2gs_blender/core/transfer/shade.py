@@ -1,10 +1,15 @@
-"""The scene kept under the laid-out texture (``keep_scene``): its light and dark, edges and parts.
+"""The scene kept under the laid-out texture (``keep_scene``, ``scene_colour``): its light and dark, edges,
+parts and colours.
 
 Laid over a whole capture, the plain texture hid the scene (the fern's SSIM to the original fell from 0.49
-to 0.05). Each splat keeps ``layout_shade`` of the texture's brightness: its own original luminance over the
-bright end of the scene's, to the power ``keep_scene`` (0: the texture's own brightness everywhere; 1: the
-texture times the scene's luminance, an albedo under the capture's own shading), as the sketch preview shades
-its texture. The shade follows each splat through densification (an optimiser attachment) to the detail
+to 0.05). Each splat keeps two things of the scene (``layout_shade``, one (N, 4) row per splat):
+- its shade: its own original luminance over the bright end of the scene's, to the power ``keep_scene`` (0:
+  the texture's own brightness everywhere; 1: the texture times the scene's luminance, an albedo under the
+  capture's own shading);
+- a share ``scene_colour`` of its own colour mixed under the shaded texture, so parts that differ in hue only
+  (a donut's pink icing and beige dough, a robot's red eyes in a grey face) stay apart.
+``under_scene`` is the one rule that applies them, to the splats, the layout term's images and the sketch
+preview alike. The row follows each splat through densification (an optimiser attachment) to the detail
 split's children.
 ``shade_softness`` first averages the luminance over neighbours within that share of a repeat
 (``spatial_blur``; the layout term's images average their surface points the same way), so only the
@@ -40,21 +45,41 @@ SPATIAL_BOUNDS_SAMPLE = 1_000_000
 
 
 def layout_shade(
-    scene: GaussianScene, rows: torch.Tensor | None = None, softness: float = 0.0, keep: float = 1.0
+    scene: GaussianScene,
+    rows: torch.Tensor | None = None,
+    softness: float = 0.0,
+    keep: float = 1.0,
+    colour: float = 0.0,
 ) -> torch.Tensor:
-    """(N,) the share of the texture's brightness each splat of ``rows`` (all when None) keeps: its
-    luminance, averaged over its neighbours within about ``softness`` (a world length, 0: its own), over the
-    bright end of those splats', to the power ``keep`` (:func:`shading`); 1 for the other splats."""
-    luminance = scene.base_colors.detach() @ torch.tensor(LUMA, dtype=scene.dtype, device=scene.device)
-    shade = torch.ones_like(luminance)
+    """(N, 4) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
+    averaged over its neighbours within about ``softness`` (a world length, 0: its own), and that colour's
+    luminance over the bright end of those splats', to the power ``keep`` (:func:`shading`); the other splats
+    keep the texture as it is."""
+    colours = scene.base_colors.detach().clamp(0.0, 1.0)
+    kept = kept_scene(torch.ones(len(scene), dtype=scene.dtype, device=scene.device), colours, 0.0)
     part = slice(None) if rows is None else rows
     if rows is not None and not bool(rows.any()):
-        return shade
-    seen = luminance[part]
+        return kept
+    seen = colours[part]
     if softness > 0:
-        seen = spatial_blur(scene.means.detach()[part], seen, scene.opacities.detach()[part], softness)
-    shade[part] = shading(seen, keep=keep)
-    return shade
+        points, weights = scene.means.detach()[part], scene.opacities.detach()[part]
+        seen = torch.stack([spatial_blur(points, seen[:, c], weights, softness) for c in range(3)], dim=1)
+    luminance = seen @ torch.tensor(LUMA, dtype=seen.dtype, device=seen.device)
+    kept[part] = kept_scene(shading(luminance, keep=keep), seen, colour)
+    return kept
+
+
+def kept_scene(shade: torch.Tensor, colours: torch.Tensor, colour: float) -> torch.Tensor:
+    """(N, 4): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the scene's
+    own ``colours`` (N, 3) is mixed under it, then that colour's share: what :func:`under_scene` applies."""
+    return torch.cat([(1.0 - colour) * shade[:, None], colour * colours.to(shade)], dim=1)
+
+
+def under_scene(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``texture`` colours laid over the scene ``kept`` (N, 4) row by row (:func:`kept_scene`): the
+    shaded texture plus the mixed-in share of the scene's own colour."""
+    kept = kept.to(texture)
+    return texture * kept[:, :1] + kept[:, 1:]
 
 
 def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
