@@ -10,7 +10,13 @@ import pytest
 import torch
 
 from gt2gs_blender.core.api import read_scene, render
-from gt2gs_blender.core.cameras.generate import auto_views, estimate_up_axis, front_for
+from gt2gs_blender.core.cameras.generate import (
+    auto_views,
+    axis_vector,
+    estimate_up_axis,
+    front_for,
+    up_from_rotation,
+)
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 QUARTER_TURN_X = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
@@ -107,3 +113,32 @@ def test_the_run_plan_reports_the_up_axis_it_found(guitar: GaussianScene) -> Non
     assert plan.asked.up == "auto" and plan.resolved()["up"] == "-y"
     given = plan_run(guitar, texture, plan.cameras, config, preview=True)
     assert given.resolved()["up"] == "auto"
+
+
+def _turn(axis: int, degrees: float) -> np.ndarray:
+    """The rotation by ``degrees`` about world axis ``axis`` (0: X, 1: Y, 2: Z), right-handed."""
+    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
+    i, j = (axis + 1) % 3, (axis + 2) % 3  # the cyclic pair: (y, z) for X, (z, x) for Y, (x, y) for Z
+    r = np.eye(3)
+    r[i, i], r[i, j], r[j, i], r[j, j] = c, -s, s, c
+    return r
+
+
+@pytest.mark.parametrize(
+    ("axis", "degrees", "up"),
+    [(0, 90, "+y"), (0, -90, "-y"), (0, 180, "-z"), (1, 90, "-x"), (1, -90, "+x"), (0, 80, "+y"), (2, 90, None)],
+)
+def test_an_object_stood_upright_in_blender_says_which_of_its_axes_is_up(axis, degrees, up) -> None:
+    """The object's own axis its turn brings to world +Z, by name, within 25°, whatever its scale; a turn about
+    +Z alone leaves +Z up, which the splats decide."""
+    r = _turn(axis, degrees)
+    assert up_from_rotation(r) == up
+    assert up_from_rotation(r * np.array([2.0, 0.5, 3.0])) == up  # the object's scale, column by column
+    if up is not None:
+        assert np.allclose(r @ np.array(axis_vector(up)), [0.0, 0.0, 1.0], atol=0.2)
+
+
+@pytest.mark.parametrize("degrees", [0.0, 10.0, 45.0, -30.0])
+def test_an_object_tilted_but_not_stood_on_another_axis_leaves_up_to_the_splats(degrees) -> None:
+    """Unturned, tilted a little about its +Z-ish pose, or turned halfway between two axes: no answer."""
+    assert up_from_rotation(_turn(0, degrees)) is None

@@ -23,6 +23,7 @@ import bpy.utils.previews
 import numpy as np
 
 from ..app.protocol import JobSpec
+from ..core.cameras.generate import up_from_rotation
 from ..core.progress import format_eta
 from ..core.transfer.presets import GPU_PRESETS
 from ..core.transfer.setting import IN_PREFERENCES, IN_SCENE
@@ -106,6 +107,15 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     if "angle" in overrides:
         config["angle"] = float(overrides["angle"])
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
+
+
+def with_object_up(config: dict[str, Any], obj) -> dict[str, Any]:
+    """``config`` with Up Axis Auto resolved from ``obj``'s own transform when the artist turned it to stand on
+    an axis (:func:`up_from_rotation`); left to the splats otherwise."""
+    if config.get("up", "auto") != "auto":
+        return config
+    up = up_from_rotation(np.array(obj.matrix_world.to_3x3()))
+    return config if up is None else {**config, "up": up}
 
 
 def machine_settings(context) -> dict[str, Any]:
@@ -330,6 +340,7 @@ class TransferRun:
             scene, _ = splats.object_to_scene(obj)
             write_ply(job.path("input.ply"), scene)
             preset, config = config_overrides(context, overrides)
+            config = with_object_up(config, obj)
             chosen = view_spec(context, obj, job, overrides)
             spec = JobSpec(
                 kind=kind,

@@ -830,3 +830,17 @@ def test_every_choice_and_number_reads_well(fresh):
             assert all(item.description for item in prop.enum_items), prop.identifier
         if prop.type == "FLOAT":
             assert prop.precision in (2, 3), (prop.identifier, prop.precision)
+
+
+def test_up_axis_auto_follows_an_object_the_artist_stood_upright(blob):
+    """A trainer's capture turned a quarter about X to stand in Blender: its own +Y is up for the run (also when a
+    script names a preset); an Up Axis the artist chose stays; an object turned about Z alone leaves it to the
+    splats."""
+    blob.rotation_euler = (math.pi / 2, 0.0, 0.0)
+    bpy.context.view_layer.update()
+    assert transfer_run.with_object_up({"up": "auto"}, blob)["up"] == "+y"
+    assert transfer_run.with_object_up({}, blob)["up"] == "+y"
+    assert transfer_run.with_object_up({"up": "-x"}, blob)["up"] == "-x"
+    blob.rotation_euler = (0.0, 0.0, 0.5)
+    bpy.context.view_layer.update()
+    assert transfer_run.with_object_up({"up": "auto"}, blob) == {"up": "auto"}

@@ -294,6 +294,18 @@ def axis_name(vector: Sequence[float]) -> str | None:
     return ("+" if v[world] > 0 else "-") + "xyz"[world]
 
 
+def up_from_rotation(rotation: Sequence[Sequence[float]]) -> str | None:
+    """The object's own axis its ``rotation`` (3 x 3, world from object, scale allowed) turns to world +Z, named
+    ('-y', ...), when within ``SNAP_DEG`` of one other than its own +Z: an artist who stood a capture upright in
+    Blender said which way is up. None for an object left on its own +Z, however tilted (the splats decide), or
+    turned off every axis."""
+    r = np.asarray(rotation, dtype=np.float64)
+    local = np.linalg.solve(r / np.linalg.norm(r, axis=0, keepdims=True), [0.0, 0.0, 1.0])
+    snapped = _snapped(local / np.linalg.norm(local))
+    name = axis_name(snapped * np.sign(local @ snapped))
+    return None if name == "+z" else name
+
+
 def axis_vector(name: str) -> tuple[float, float, float]:
     """The unit vector of an axis named by an optional sign and x, y or z ('+z', '-y', 'x')."""
     sign, letter = (name[0], name[1:]) if name[:1] in "+-" else ("+", name)

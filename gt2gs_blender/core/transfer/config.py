@@ -54,8 +54,9 @@ class TransferConfig(MachineSettings):
     up: UpAxis = setting(
         "auto",
         "Up Axis",
-        "The scene's up direction, for automatic views. Auto finds it from the splats: the end a tall object "
-        "stands on, the ground under a capture, else +Z (Blender's up; -Y for a trainer's capture lying flat). "
+        "The scene's up direction, for automatic views. Auto: in Blender, the object's axis you turned to point "
+        "up; else from the splats: the end a tall object stands on, the ground under a capture, else +Z "
+        "(Blender's up; -Y for a trainer's capture lying flat). "
         "Set it when the views lie on their side (on the command line: --up=-y)",
         "views",
         choices=get_args(UpAxis),
