@@ -1,0 +1,142 @@
+"""The ceiling of each way to keep the scene under the texture (issue 37), free of splats and optimisation.
+
+Per held-out view of a bench scene, the layout as an exact surface shows it (``layout_surface``: the texture
+per pixel, unshaded) is composed with the original render by a rule, and the composite is judged as a result
+is in ``bench/recognise.py``: the structure ranks (Gram and Gabor, among the 10 textures) and the content
+(luminance SSIM to the original over the object's pixels). A rule that cannot reach both here cannot reach
+them through splats either; a rule that can is worth laying on the splats.
+
+Rules (``T``: texture RGB, ``Y``: the original's luminance per pixel, over the object's pixels):
+- *Keep Scene* k: ``T * (Y / bright end)^k``, the engine's ``shading`` (bright end: the 95th percentile of ``Y``);
+- *Scene Colour* c: that times ``1 - c``, plus ``c`` times the original's colour (the engine's ``under_scene``);
+- ``contrast``: the texture's contrast about its mean luminance scaled by a factor first;
+- ``matched``: the composite scaled so its mean luminance is the original's (the scene's own brightness,
+  which SSIM's luminance term compares; the structure measures divide it out).
+
+    python bench/keep_frontier.py --scenes fern donut
+
+Prints a table and writes bench/out/keep_frontier.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+import recognise as rb
+import recognise_measure as measure
+from recognise_scenes import layout_surface, load_bench_scene, run_start
+
+from gt2gs_blender.core.transfer.shade import kept_scene, shading, under_scene
+
+OUT = ROOT / "bench" / "out" / "keep_frontier.json"
+
+
+@dataclass(frozen=True)
+class Rule:
+    name: str
+    keep: float
+    colour: float = 0.0
+    contrast: float = 1.0
+    matched: bool = False
+
+
+RULES = (
+    Rule("texture alone", 0.0),
+    Rule("Keep Scene 0.5", 0.5),
+    Rule("Keep Scene 1", 1.0),
+    Rule("Keep Scene 1, Scene Colour 0.3", 1.0, 0.3),
+    Rule("Keep Scene 1, Scene Colour 0.5", 1.0, 0.5),
+    Rule("Keep Scene 1, Scene Colour 0.15", 1.0, 0.15),
+    Rule("Keep Scene 0.5, Scene Colour 0.3", 0.5, 0.3),
+    Rule("Keep Scene 0.75, Scene Colour 0.3", 0.75, 0.3),
+    Rule("Keep Scene 0.5, Scene Colour 0.4", 0.5, 0.4),
+    Rule("Keep Scene 1, contrast 0.7", 1.0, contrast=0.7),
+    Rule("matched, Keep Scene 1", 1.0, matched=True),
+    Rule("matched, Keep Scene 1, contrast 0.7", 1.0, contrast=0.7, matched=True),
+    Rule("matched, Keep Scene 0.75", 0.75, matched=True),
+    Rule("matched, Keep Scene 1, Scene Colour 0.3", 1.0, 0.3, matched=True),
+    Rule("matched, Keep Scene 0.75, Scene Colour 0.3", 0.75, 0.3, matched=True),
+)
+
+
+def compose(
+    rule: Rule, texture: np.ndarray, surface: np.ndarray, original: np.ndarray, alpha: np.ndarray, background
+) -> np.ndarray:
+    """The composite of a view (RGB uint8 over ``background``) under ``rule``, by the engine's own
+    :func:`shading` and :func:`under_scene`; the original where the surface (coverage ``surface``) has none."""
+    covered = (alpha > measure.MASK_ALPHA) & (surface > measure.MASK_ALPHA)
+    a = torch.from_numpy(alpha.astype(np.float32))[..., None]
+    bg = torch.tensor(background, dtype=torch.float32)
+    t, o = (torch.from_numpy(x.astype(np.float32) / 255.0) for x in (texture, original))
+    t, o = ((x - (1 - a) * bg) / a.clamp_min(1e-3) for x in (t, o))  # un-composited from the background
+    inside = torch.from_numpy(covered)
+    t, o = t[inside], o[inside].clamp(0.0, 1.0)
+    luma = torch.tensor(measure.LUMA)
+    mean = float((t @ luma).mean())
+    t = mean + rule.contrast * (t - mean)
+    y = o @ luma
+    out = under_scene(t, kept_scene(shading(y, keep=rule.keep), o, rule.colour))
+    if rule.matched:
+        out = out * float(y.mean()) / max(float((out @ luma).mean()), 1e-6)
+    over = original.copy()
+    shown = out.clamp(0.0, 1.0) * a[inside] + (1 - a[inside]) * bg
+    over[covered] = (shown.numpy() * 255 + 0.5).astype(np.uint8)
+    return over
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenes", nargs="+", default=["fern", "donut"], choices=rb.SCENES)
+    parser.add_argument("--textures", nargs="+", default=list(rb.STRUCTURED))
+    args = parser.parse_args()
+    stats = [measure.cached_texture_stats(p) for p in sorted(rb.TEXTURES.iterdir()) if p.is_file()]
+    rows = []
+    for name in args.scenes:
+        bench = load_bench_scene(name)
+        original = rb.held_out_renders(bench.scene, bench)
+        config = rb.preset("fast", weights_path=str(rb.SHARED / "weights"), background=bench.background)
+        for texture in args.textures:
+            run = run_start(bench, config, rb.texture_path(texture))
+            surface = layout_surface(run, bench, rb.texture_path(texture))
+            for rule in RULES:
+                t0 = time.perf_counter()
+                views = [
+                    (compose(rule, s, coverage, o, alpha, bench.background), alpha)
+                    for (s, coverage), (o, alpha) in zip(surface, original, strict=True)
+                ]
+                seen = [(rgb, np.minimum(alpha, coverage)) for (rgb, alpha), (_, coverage) in zip(views, surface)]
+                r = rb.row(name, texture, rule.name, rb.score(rb.view_stats(seen), stats))
+                r["content_ssim"] = rb.content_ssim(views, original)
+                r.pop("distances")
+                rows.append(r)
+                print(
+                    f"{name:6s} {texture:17s} {rule.name:30s} G{r['gram_rank']:<2d} B{r['gabor_rank']:<2d} "
+                    f"content {r['content_ssim']:.3f}  ({time.perf_counter() - t0:.1f} s)",
+                    flush=True,
+                )
+    print("\nscene   rule                            top-3 both   mean content")
+    for name in args.scenes:
+        for rule in RULES:
+            mine = [r for r in rows if r["scene"] == name and r["variant"] == rule.name]
+            both = sum(r["gram_rank"] <= rb.TOP and r["gabor_rank"] <= rb.TOP for r in mine)
+            content = float(np.mean([r["content_ssim"] for r in mine]))
+            print(f"{name:6s}  {rule.name:30s}  {both}/{len(mine)}          {content:.3f}")
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    OUT.write_text(json.dumps({"rules": [r.__dict__ for r in RULES], "rows": rows}, indent=1))
+    print(f"wrote {OUT}")
+
+
+if __name__ == "__main__":
+    main()
