@@ -909,7 +909,7 @@ def test_automatic_views_stand_on_the_named_up_axis(name, vector):
 
 
 def test_an_unknown_up_axis_is_refused():
-    from gt2gs_blender.core.cameras.generate import axis_vector
+    from gt2gs_blender.core.cameras.axes import axis_vector
 
     assert axis_vector("-y") == (0.0, -1.0, 0.0) and axis_vector("z") == (0.0, 0.0, 1.0)
     with pytest.raises(ValueError, match="an axis such as"):

@@ -23,7 +23,7 @@ import bpy.utils.previews
 import numpy as np
 
 from ..app.protocol import JobSpec
-from ..core.cameras.generate import up_from_rotation
+from ..core.cameras.axes import up_from_rotation
 from ..core.progress import format_eta
 from ..core.transfer.presets import GPU_PRESETS
 from ..core.transfer.setting import IN_PREFERENCES, IN_SCENE

@@ -19,8 +19,7 @@ from typing import Any
 import bpy
 
 from ..blender import machine, textures, transfer_run, views
-from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
-from ..core.transfer.layout import keeps_scene
+from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, keeps_scene, user_settings
 from ..core.transfer.setting import IN_SCENE, PARTS
 from .sidebar import CATEGORY, LABEL_CHARS, text_lines
 

@@ -11,6 +11,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..scene.gaussians import GaussianScene
+from .axes import axis_vector, snapped
 from .camera import Camera
 
 
@@ -200,9 +201,6 @@ this share of the middle one: up is that axis."""
 ELONGATION = 3.0
 """A scene stands tall (a guitar on its stand, a lamp) when its largest variance is this many times the middle one
 and one end of it is a support (:func:`_support_sign`): up is that axis, before any flatness (a guitar is flat too)."""
-SNAP_DEG = 25.0
-"""An axis found within this angle of a world axis is that axis (captures keep a trainer's or Blender's convention;
-a leaning neck or a sloping ground does not tilt the views)."""
 SUPPORT_SLAB = 0.15
 SUPPORT_RATIO = 1.5
 """The sign: the end whose outer ``SUPPORT_SLAB`` of the height spreads this many times wider than the other's is the
@@ -222,25 +220,15 @@ def estimate_up_axis(points: np.ndarray, prefer: Sequence[float] | None = None) 
         return default
     variances, axes = np.linalg.eigh(np.cov(pts.T))
     if variances[2] > ELONGATION * variances[1]:
-        tall = _snapped(axes[:, 2])
+        tall = snapped(axes[:, 2])
         if (sign := _support_sign(pts, pts @ tall, tall)) != 0:
             return sign * tall
-    axis = _snapped(axes[:, 0] if variances[0] < FLATNESS * variances[1] else default)
+    axis = snapped(axes[:, 0] if variances[0] < FLATNESS * variances[1] else default)
     if (sign := _support_sign(pts, pts @ axis, axis)) != 0:
         return sign * axis
     world = int(np.argmax(np.abs(axis)))
     reference = np.asarray(CONVENTION[world]) if prefer is None and abs(axis[world]) == 1.0 else default
     return axis if axis @ reference >= 0 else -axis
-
-
-def _snapped(axis: np.ndarray) -> np.ndarray:
-    """``axis`` (unit), or the world axis within ``SNAP_DEG`` of it (either sign: the sign is chosen later)."""
-    world = int(np.argmax(np.abs(axis)))
-    if abs(axis[world]) < math.cos(math.radians(SNAP_DEG)):
-        return axis / np.linalg.norm(axis)
-    snapped = np.zeros(3)
-    snapped[world] = 1.0
-    return snapped
 
 
 def _support_sign(points: np.ndarray, heights: np.ndarray, axis: np.ndarray) -> int:
@@ -283,37 +271,6 @@ def scene_up(scene: GaussianScene, quantile: float = 0.98) -> np.ndarray:
     lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
     means = scene.means.detach().double().cpu().numpy()
     return estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
-
-
-def axis_name(vector: Sequence[float]) -> str | None:
-    """The signed world axis ``vector`` is ('+z', '-y', ...), or None when it is none of them."""
-    v = np.asarray(vector, dtype=np.float64)
-    world = int(np.argmax(np.abs(v)))
-    if abs(v[world]) != 1.0 or np.count_nonzero(v) != 1:
-        return None
-    return ("+" if v[world] > 0 else "-") + "xyz"[world]
-
-
-def up_from_rotation(rotation: Sequence[Sequence[float]]) -> str | None:
-    """The object's own axis its ``rotation`` (3 x 3, world from object, scale allowed) turns to world +Z, named
-    ('-y', ...), when within ``SNAP_DEG`` of one other than its own +Z: an artist who stood a capture upright in
-    Blender said which way is up. None for an object left on its own +Z, however tilted (the splats decide), or
-    turned off every axis."""
-    r = np.asarray(rotation, dtype=np.float64)
-    local = np.linalg.solve(r / np.linalg.norm(r, axis=0, keepdims=True), [0.0, 0.0, 1.0])
-    snapped = _snapped(local / np.linalg.norm(local))
-    name = axis_name(snapped * np.sign(local @ snapped))
-    return None if name == "+z" else name
-
-
-def axis_vector(name: str) -> tuple[float, float, float]:
-    """The unit vector of an axis named by an optional sign and x, y or z ('+z', '-y', 'x')."""
-    sign, letter = (name[0], name[1:]) if name[:1] in "+-" else ("+", name)
-    if letter not in ("x", "y", "z"):
-        raise ValueError(f"up must be a 3-vector, 'auto' or an axis such as +z or -y, got {name!r}")
-    vector = [0.0, 0.0, 0.0]
-    vector["xyz".index(letter)] = -1.0 if sign == "-" else 1.0
-    return (vector[0], vector[1], vector[2])
 
 
 def auto_views(

@@ -482,3 +482,9 @@ def setting_type(name: str) -> type:
 
 
 _HINTS = get_type_hints(TransferConfig)
+
+
+def keeps_scene(config: TransferConfig) -> bool:
+    """Whether the laid-out texture keeps anything of the scene under it (its light and dark, or its colour);
+    also asked of Blender's scene settings, which have the same names."""
+    return config.keep_scene > 0 or config.scene_colour > 0

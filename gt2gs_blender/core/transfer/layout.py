@@ -51,7 +51,7 @@ from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
 from .bank import bank_depth_ratio
-from .config import FORWARD_SPREAD_DEG, TransferConfig
+from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .metrics import LUMA
 from .setting import Projection
 from .shade import kept_scene, layout_shade, shading, spatial_blur, under_scene
@@ -414,11 +414,6 @@ def layout_shading(
     if not keeps_scene(config):
         return None
     return layout_shade(scene, rows, shade_width(frame, config), config.keep_scene, config.scene_colour)
-
-
-def keeps_scene(config: TransferConfig) -> bool:
-    """Whether the laid-out texture keeps anything of the scene under it (its light and dark, or its colour)."""
-    return config.keep_scene > 0 or config.scene_colour > 0
 
 
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:

@@ -26,10 +26,10 @@ from ..render import resolve_backend
 from ..scene.gaussians import GaussianScene
 from . import color_transfer
 from .bank import build_bank, nnfm_bank
-from .config import TransferConfig
+from .config import TransferConfig, keeps_scene
 from .content import content_degree
 from .detail import add_detail, split_for_detail
-from .layout import keeps_scene, lay_out, layout_images, layout_shading, shade_width
+from .layout import lay_out, layout_images, layout_shading, shade_width
 from .metrics import COVERED, preview_ssim
 from .orientation_preview import show
 from .plan import RunPlan, plan_run

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..cameras.axes import axis_name
 from ..cameras.camera import Camera
-from ..cameras.generate import axis_name, scene_up
+from ..cameras.generate import scene_up
 from ..device import resolve_device
 from ..scene.gaussians import GaussianScene
 from .bank import bank_depth_ratio

@@ -17,7 +17,7 @@ FeatureNetwork = Literal["auto", "vgg16_relu3", "vgg19_norm_relu3"]
 Device = Literal["auto", "cpu", "cuda"]
 Rasterizer = Literal["auto", "torch", "cpu", "numba", "gsplat"]
 UpAxis = Literal["+z", "-z", "+y", "-y", "+x", "-x", "auto"]
-"""The scene's up direction for automatic views (``cameras.generate.axis_vector``'s names, or estimated)."""
+"""The scene's up direction for automatic views (``cameras.axes.axis_vector``'s names, or estimated)."""
 
 PARTS = {
     "views": "Views",
