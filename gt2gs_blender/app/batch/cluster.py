@@ -249,10 +249,11 @@ def _run(
         for job, key in todo
     }
     attempts: dict[str, int] = {}
+    running: set[str] = set()
     pending = as_completed(futures)
     try:
         while not pending.is_empty():
-            _show_starts(events, batch, attempts, board)
+            _take_events(events, batch, attempts, running, board)
             for future in pending.next_batch(block=False) if pending.has_ready() else ():
                 job = futures[future]
                 rows[job.name] = _row(future, job, out, attempts.get(job.name, 1))
@@ -262,24 +263,42 @@ def _run(
         board.say("interrupted: cancelling the batch (the running jobs stop and write nothing)")
         finished_now = [f for f in futures if f.status == "finished" and futures[f].name not in rows]
         _cancel(client, batch, [f for f in futures if f not in finished_now])
+        deadline = time.monotonic() + CANCEL_GRACE_S
+        while running and time.monotonic() < deadline:  # each stops at its next look at the event, or finishes
+            time.sleep(POLL_S)
+            _take_events(events, batch, attempts, running, board)
         for future in finished_now:  # ended before the interrupt, not yet shown
             job = futures[future]
             rows[job.name] = _row(future, job, out, attempts.get(job.name, 1))
             board.end(rows[job.name])
+        for job, key in todo:  # wrote its whole result while the cancel reached its worker: done, not cancelled
+            report = None if job.name in rows else finished(out, job, key)
+            if report is not None:
+                seconds = float(report.get("seconds") or 0.0)
+                rows[job.name] = Row(job, "done", attempts.get(job.name, 1), seconds, report=report)
+                board.end(rows[job.name])
         return True
     finally:
         client.unsubscribe_topic(TOPIC)
     return False
 
 
-def _show_starts(events: queue.SimpleQueue, batch: str, attempts: dict[str, int], board: Board) -> None:
-    """Print the start events that came in since the last call, counting each job's attempts."""
+def _take_events(
+    events: queue.SimpleQueue, batch: str, attempts: dict[str, int], running: set[str], board: Board
+) -> None:
+    """Take the jobs' start and end events that came in since the last call: print each start, count each job's
+    attempts, and keep ``running`` the jobs started on a worker and not yet returned there."""
     while not events.empty():
         _, message = events.get()
-        if isinstance(message, dict) and message.get("batch") == batch:
-            name = message["job"]
-            attempts[name] = attempts.get(name, 0) + 1
-            board.start(name, message["worker"], attempts[name])
+        if not isinstance(message, dict) or message.get("batch") != batch:
+            continue
+        name = message["job"]
+        if message.get("ended"):
+            running.discard(name)
+            continue
+        attempts[name] = attempts.get(name, 0) + 1
+        running.add(name)
+        board.start(name, message["worker"], attempts[name])
 
 
 def _row(future: Any, job: Job, out: Path, attempts: int) -> Row:
@@ -300,13 +319,11 @@ def _row(future: Any, job: Job, out: Path, attempts: int) -> Row:
 
 
 def _cancel(client: Client, batch: str, futures: list) -> None:
-    """Tell the running jobs to stop (they poll the batch's event), drop the queued ones, and wait a little for the
-    workers to clean up."""
+    """Tell the running jobs to stop (they poll the batch's event) and drop the queued ones. A cancelled future
+    leaves the scheduler at once, while its job runs on until it next looks at the event (or writes its whole
+    result): its end event says when it returned."""
     Event(f"{TOPIC}-cancel-{batch}", client=client).set()
     client.cancel(futures)
-    deadline = time.monotonic() + CANCEL_GRACE_S
-    while time.monotonic() < deadline and any(client.processing().values()):
-        time.sleep(POLL_S)
 
 
 def _tidy(out: Path, jobs: list[Job]) -> None:
@@ -320,8 +337,8 @@ def _tidy(out: Path, jobs: list[Job]) -> None:
 
 
 def _task(job: Job, out: str, key: str, batch: str, threads: dict[str, int] | int) -> Outcome:
-    """A job on its worker: announce the start, pick this worker's threads (and GPU), run it; stop when the
-    batch is cancelled."""
+    """A job on its worker: announce the start, pick this worker's threads (and GPU), run it (stopping when the
+    batch is cancelled), announce the end."""
     worker = get_worker()
     worker.log_event(TOPIC, {"batch": batch, "job": job.name, "worker": worker.address, "pid": os.getpid()})
     if isinstance(threads, dict):
@@ -329,7 +346,10 @@ def _task(job: Job, out: str, key: str, batch: str, threads: dict[str, int] | in
         threads = threads.get(host) or max(1, (os.cpu_count() or 1) // worker.state.nthreads)
     _pick_gpu(worker.name)
     meta = {"worker": worker.address, "batch": batch}
-    return run_job(job, Path(out), key, threads=threads, cancel=_cancelled(f"{TOPIC}-cancel-{batch}"), batch=meta)
+    try:
+        return run_job(job, Path(out), key, threads=threads, cancel=_cancelled(f"{TOPIC}-cancel-{batch}"), batch=meta)
+    finally:
+        worker.log_event(TOPIC, {"batch": batch, "job": job.name, "ended": True})
 
 
 def _pick_gpu(name: Any) -> None:
