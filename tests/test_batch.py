@@ -148,12 +148,15 @@ def test_a_bad_texture_fails_alone_with_its_one_line_error(inputs, tmp_path, cap
 
 def test_resume_after_ctrl_c_runs_only_the_jobs_that_did_not_finish(cluster, inputs, tmp_path):
     """Ctrl-C (SIGINT to the batch command) once a job is done: the others stop and leave nothing; --resume then
-    runs only those. Five jobs on two workers, so some are still to run when the signal lands, however slowly the
-    test reads the command's output on a busy machine."""
+    runs only those. Five jobs on two workers, each long enough (400 steps) that some are still to run when the
+    signal lands, however slowly the test reads the command's output on a busy machine (at the preview's 40 steps,
+    warm workers finished the whole batch before the signal)."""
     manifest = tmp_path / "jobs.toml"
     angles = "[0, 30, 60, 90, 120]"
     manifest.write_text(
-        SMALL + f"[[product]]\nscene = '{inputs['torus']}'\ntexture = '{inputs['stripes']}'\nangle = {angles}\n"
+        SMALL
+        + "stylise_steps = 400\n"
+        + f"[[product]]\nscene = '{inputs['torus']}'\ntexture = '{inputs['stripes']}'\nangle = {angles}\n"
     )
     out = tmp_path / "out"
     command = [sys.executable, "-m", "gt2gs_blender", "batch", str(manifest), "--out", str(out), "--threads", "1"]
