@@ -287,3 +287,18 @@ def test_decompression_bombs_are_refused_from_their_headers_under_a_memory_limit
     assert result.returncode == 0 and result.stderr == "", result.stderr
     seconds, message = result.stdout.strip().split(" ", 1)
     assert float(seconds) < 2.0 and message.startswith(f"{path}: ") and fragment in message, message
+
+
+def test_a_sog_zip_asking_for_a_zip_version_python_lacks_is_refused_in_one_line(tmp_path):
+    """A central directory whose entry needs zip version 12.7 to extract (hypothesis found one on Python 3.13, where
+    zipfile raises NotImplementedError on opening): the one-line error naming the file, not a traceback."""
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("meta.json", "{}")
+    data = bytearray(buffer.getvalue())
+    entry = data.index(b"PK\x01\x02")  # the central directory's record of meta.json
+    struct.pack_into("<H", data, entry + 6, 127)  # version needed to extract: 12.7
+    path = place(tmp_path, "future.sog", bytes(data))
+    with pytest.raises(InputFileError) as refused:
+        READERS[SOG](path)
+    assert str(path) in str(refused.value) and "\n" not in str(refused.value)

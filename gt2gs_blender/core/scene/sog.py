@@ -203,7 +203,7 @@ def _open_source(path: Path) -> _Source:
         return _Source(path, folder=path.parent)
     try:
         archive = zipfile.ZipFile(io.BytesIO(data))
-    except (zipfile.BadZipFile, OSError, ValueError) as exc:
+    except ZIP_ERRORS as exc:  # a central directory asking for a zip version zipfile lacks: NotImplementedError
         raise SplatFormatError(path, f"not a readable zip archive ({exc})") from None
     if META_NAME not in archive.namelist():
         raise SplatFormatError(path, f"the zip holds no {META_NAME}: not a SOG file")
