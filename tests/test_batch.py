@@ -161,7 +161,16 @@ def test_resume_after_ctrl_c_runs_only_the_jobs_that_did_not_finish(cluster, inp
     out = tmp_path / "out"
     command = [sys.executable, "-m", "gt2gs_blender", "batch", str(manifest), "--out", str(out), "--threads", "1"]
     command += ["--scheduler", cluster.scheduler.address]
-    with subprocess.Popen(command, cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as batch_cmd:
+    # as a terminal starts it, Ctrl-C at its default (else an ignored SIGINT, which this test process may have
+    # picked up from an earlier test, passes to the command and Python never turns it into KeyboardInterrupt)
+    with subprocess.Popen(
+        command,
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    ) as batch_cmd:
         for line in batch_cmd.stdout:
             if line.startswith("done "):
                 batch_cmd.send_signal(signal.SIGINT)
