@@ -86,11 +86,11 @@ def test_inria_names_and_sh_layout():
 
 @pytest.mark.parametrize("literal", ["0.28209479177387814", "1 - 2 * (y * y + z * z)"])
 def test_conventions_are_written_once_in_the_package(literal):
-    """SH_C0 lives in core/scene/inria.py; the quaternion formula in core/rotations.py (numpy) and
-    core/scene/gaussians.py (its torch twin for the engine) only."""
+    """SH_C0 lives in core/scene/inria.py; the quaternion formula in core/rotations.py only (numpy, torch and the
+    numba kernel all call it)."""
     homes = {
         "0.28209479177387814": {"core/scene/inria.py"},
-        "1 - 2 * (y * y + z * z)": {"core/rotations.py", "core/scene/gaussians.py"},
+        "1 - 2 * (y * y + z * z)": {"core/rotations.py"},
     }[literal]
     found = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if literal in p.read_text(encoding="utf-8")}
     assert found == homes

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch
 
+from ..rotations import rotation_entries
 from .arrays import PARAMETERS
 from .inria import SH_C0, sh_coeff_count, sh_degree_from_rest
 
@@ -234,18 +235,5 @@ def normalize_quats(quats: torch.Tensor) -> torch.Tensor:
 
 def quats_to_rotmats(quats: torch.Tensor) -> torch.Tensor:
     """Rotation matrices (..., 3, 3) from quaternions (w, x, y, z); normalises first."""
-    w, x, y, z = normalize_quats(quats).unbind(-1)
-    return torch.stack(
-        [
-            1 - 2 * (y * y + z * z),
-            2 * (x * y - w * z),
-            2 * (x * z + w * y),
-            2 * (x * y + w * z),
-            1 - 2 * (x * x + z * z),
-            2 * (y * z - w * x),
-            2 * (x * z - w * y),
-            2 * (y * z + w * x),
-            1 - 2 * (x * x + y * y),
-        ],
-        dim=-1,
-    ).reshape((*quats.shape[:-1], 3, 3))
+    entries = rotation_entries(*normalize_quats(quats).unbind(-1))
+    return torch.stack(entries, dim=-1).reshape((*quats.shape[:-1], 3, 3))
