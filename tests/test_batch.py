@@ -161,8 +161,9 @@ def test_resume_after_ctrl_c_runs_only_the_jobs_that_did_not_finish(cluster, inp
     out = tmp_path / "out"
     command = [sys.executable, "-m", "gt2gs_blender", "batch", str(manifest), "--out", str(out), "--threads", "1"]
     command += ["--scheduler", cluster.scheduler.address]
-    # as a terminal starts it, Ctrl-C at its default (else an ignored SIGINT, which this test process may have
-    # picked up from an earlier test, passes to the command and Python never turns it into KeyboardInterrupt)
+    # as a terminal starts it, Ctrl-C at its default: a suite started in the background by a shell without job
+    # control (`make test &`) runs with SIGINT ignored, which the command would inherit, and Python never turns an
+    # ignored SIGINT into KeyboardInterrupt
     with subprocess.Popen(
         command,
         cwd=REPO,
