@@ -11,8 +11,10 @@ Rules (``T``: texture RGB, ``Y``: the original's luminance per pixel, over the o
 - *Keep Scene* k: ``T * (Y / bright end)^k``, the engine's ``shading`` (bright end: the 95th percentile of ``Y``);
 - *Scene Colour* c: that times ``1 - c``, plus ``c`` times the original's colour (the engine's ``under_scene``);
 - ``contrast``: the texture's contrast about its mean luminance scaled by a factor first;
-- ``matched``: the composite scaled so its mean luminance is the original's (the scene's own brightness,
-  which SSIM's luminance term compares; the structure measures divide it out).
+- ``matched``: the composite scaled by a gain so its mean luminance is the original's (the scene's own
+  brightness, which SSIM's luminance term compares; the structure measures divide it out): clips on a light object;
+- *Scene Brightness* b: the composite at ``b`` of the exposure that gives it the original's mean luminance
+  (the engine's ``exposed``: a gain to darken, a power to lighten, so nothing clips).
 
     python bench/keep_frontier.py --scenes fern donut
 
@@ -23,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -39,7 +42,14 @@ import recognise as rb
 import recognise_measure as measure
 from recognise_scenes import layout_surface, load_bench_scene, run_start
 
-from gt2gs_blender.core.transfer.shade import kept_scene, shading, under_scene
+from gt2gs_blender.core.transfer.shade import (
+    EXPOSURE_RANGE,
+    exposed,
+    exposed_luminance,
+    kept_scene,
+    shading,
+    under_scene,
+)
 
 OUT = ROOT / "bench" / "out" / "keep_frontier.json"
 
@@ -51,6 +61,7 @@ class Rule:
     colour: float = 0.0
     contrast: float = 1.0
     matched: bool = False
+    brightness: float = 0.0
 
 
 RULES = (
@@ -69,7 +80,25 @@ RULES = (
     Rule("matched, Keep Scene 0.75", 0.75, matched=True),
     Rule("matched, Keep Scene 1, Scene Colour 0.3", 1.0, 0.3, matched=True),
     Rule("matched, Keep Scene 0.75, Scene Colour 0.3", 0.75, 0.3, matched=True),
+    Rule("Keep Scene 1, Scene Brightness 1", 1.0, 0.0, brightness=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.15, Scene Brightness 1", 1.0, 0.15, brightness=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.2, Scene Brightness 1", 1.0, 0.2, brightness=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.25, Scene Brightness 1", 1.0, 0.25, brightness=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.3, Scene Brightness 1", 1.0, 0.3, brightness=1.0),
+    Rule("Keep Scene 0.75, Scene Brightness 1", 0.75, 0.0, brightness=1.0),
+    Rule("Keep Scene 0.75, Scene Colour 0.15, Scene Brightness 1", 0.75, 0.15, brightness=1.0),
+    Rule("Keep Scene 0.75, Scene Colour 0.2, Scene Brightness 1", 0.75, 0.2, brightness=1.0),
 )
+
+
+def exposure_match(out: torch.Tensor, target: float, luma: torch.Tensor) -> float:
+    """The exposure (the engine's :func:`exposed`) that gives ``out`` (RGB in 0..1) the mean luminance ``target``."""
+    luminance = out @ luma
+    low, high = (math.log(e) for e in EXPOSURE_RANGE)
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if float(exposed_luminance(luminance, math.exp(mid)).mean()) < target else (low, mid)
+    return math.exp(0.5 * (low + high))
 
 
 def compose(
@@ -91,6 +120,10 @@ def compose(
     out = under_scene(t, kept_scene(shading(y, keep=rule.keep), o, rule.colour))
     if rule.matched:
         out = out * float(y.mean()) / max(float((out @ luma).mean()), 1e-6)
+    if rule.brightness > 0:
+        out = exposed(
+            out.clamp(0.0, 1.0), exposure_match(out.clamp(0.0, 1.0), float(y.mean()), luma) ** rule.brightness
+        )
     over = original.copy()
     shown = out.clamp(0.0, 1.0) * a[inside] + (1 - a[inside]) * bg
     over[covered] = (shown.numpy() * 255 + 0.5).astype(np.uint8)
@@ -101,7 +134,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenes", nargs="+", default=["fern", "donut"], choices=rb.SCENES)
     parser.add_argument("--textures", nargs="+", default=list(rb.STRUCTURED))
+    parser.add_argument("--rules", nargs="+", help="only the rules whose names contain one of these")
     args = parser.parse_args()
+    rules = [r for r in RULES if not args.rules or any(part in r.name for part in args.rules)]
     stats = [measure.cached_texture_stats(p) for p in sorted(rb.TEXTURES.iterdir()) if p.is_file()]
     rows = []
     for name in args.scenes:
@@ -111,7 +146,7 @@ def main() -> None:
         for texture in args.textures:
             run = run_start(bench, config, rb.texture_path(texture))
             surface = layout_surface(run, bench, rb.texture_path(texture))
-            for rule in RULES:
+            for rule in rules:
                 t0 = time.perf_counter()
                 views = [
                     (compose(rule, s, coverage, o, alpha, bench.background), alpha)
@@ -129,13 +164,13 @@ def main() -> None:
                 )
     print("\nscene   rule                            top-3 both   mean content")
     for name in args.scenes:
-        for rule in RULES:
+        for rule in rules:
             mine = [r for r in rows if r["scene"] == name and r["variant"] == rule.name]
             both = sum(r["gram_rank"] <= rb.TOP and r["gabor_rank"] <= rb.TOP for r in mine)
             content = float(np.mean([r["content_ssim"] for r in mine]))
             print(f"{name:6s}  {rule.name:30s}  {both}/{len(mine)}          {content:.3f}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
-    OUT.write_text(json.dumps({"rules": [r.__dict__ for r in RULES], "rows": rows}, indent=1))
+    OUT.write_text(json.dumps({"rules": [r.__dict__ for r in rules], "rows": rows}, indent=1))
     print(f"wrote {OUT}")
 
 

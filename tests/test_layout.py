@@ -401,7 +401,9 @@ def test_the_layout_keeps_the_scene_s_light_and_shade(shared, tmp_path, keep):
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, keep_scene=keep, scene_colour=0.0, shade_softness=0.0)
+    config = zero_step_config(
+        shared, tmp_path, keep_scene=keep, scene_colour=0.0, scene_brightness=0.0, shade_softness=0.0
+    )
     result = transfer(scene, white, [cam], config)
     colours = result.scene.base_colors.mean(1)
     on_left = result.scene.means[:, 0] < -0.1
@@ -432,7 +434,14 @@ def test_a_whole_run_keeps_the_two_tones_of_the_scene_under_a_flat_texture(share
     scene, cam, _ = half_dark_wall()
     grey = np.full((64, 64, 3), 0.5, np.float32)
     config = wall_config(
-        shared, tmp_path, stylise_steps=12, correct_steps=4, keep_scene=keep, scene_colour=0.0, background=(0, 0, 0)
+        shared,
+        tmp_path,
+        stylise_steps=12,
+        correct_steps=4,
+        keep_scene=keep,
+        scene_colour=0.0,
+        scene_brightness=0.0,
+        background=(0, 0, 0),
     )
     result = transfer(scene, grey, [cam], config)
     shown = render(result.scene, [cam], background=torch.zeros(3)).colors[0].mean(-1)
@@ -450,7 +459,7 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, scene_colour=0.0, shade_softness=0.1)
+    config = zero_step_config(shared, tmp_path, scene_colour=0.0, scene_brightness=0.0, shade_softness=0.1)
     result = transfer(scene, white, [cam], config)
     colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
     dark, seam = 0.2 / 0.8, 0.5 / 0.8
@@ -476,6 +485,85 @@ PINK, BLUE = (0.9, 0.5, 0.5), (0.4, 0.6, 0.9)
 """Two hues of nearly one luminance (0.585 and 0.579): a donut's icing and dough to the luminance alone."""
 
 
+@pytest.mark.parametrize(("grey", "left", "right"), [(1.0, 0.2, 0.8), (0.25, (5**0.5 - 1) ** 2 / 4, (5**0.5 - 1) / 2)])
+def test_scene_brightness_gives_the_laid_texture_the_scene_s_mean_luminance(shared, tmp_path, grey, left, right):
+    """The half-dark wall (luminance 0.2 and 0.8, mean 0.5) at Keep Scene 1, Scene Brightness 1, under a flat
+    texture: white, shaded to 0.25 and 1 (mean 0.625), comes back by a gain of 0.8 to the scene itself, 0.2 and
+    0.8; a dark grey 0.25, shaded to 1/16 and 1/4, by the power p with (1/16)^p + (1/4)^p = 1, so 1/4^p is
+    the golden ratio's 0.618 and 1/16^p its square (nothing clips, the halves keep their order). The preview
+    and the layout term's image show the same."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+    from gt2gs_blender.core.transfer.shade import laid_exposure, layout_shade
+
+    scene, cam, _ = half_dark_wall()
+    texture = np.full((64, 64, 3), grey, np.float32)
+    config = zero_step_config(shared, tmp_path, keep_scene=1.0, scene_colour=0.0, scene_brightness=1.0)
+    result = transfer(scene, texture, [cam], config)
+    colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
+    assert float(colours[x < -0.1].mean()) == pytest.approx(left, abs=0.01)
+    assert float(colours[x > 0.1].mean()) == pytest.approx(right, abs=0.01)
+    expected = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(preview(scene, texture, [cam], config, size=96).image.astype(np.float32) - expected).max() <= 1.0
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    exposure = laid_exposure(layout_shade(scene, None, keep=1.0, texture=texture, brightness=1.0), None)
+    (ideal,) = layout_images(views, texture, layout_frame(scene, views, config), 0.0, True, exposure=exposure)
+    covered = ideal[:, : 96 // 2 - 6, 3] > 0  # the wall's left half on screen, away from the seam
+    assert float(ideal[:, : 96 // 2 - 6, 0][covered].mean()) == pytest.approx(left, abs=0.02)
+
+
+def test_scene_brightness_below_one_takes_that_share_of_the_exposure_s_stops():
+    """Scene Brightness 0.5 exposes by the square root of what 1 does (half the stops), 0 not at all."""
+    from gt2gs_blender.core.transfer.shade import layout_shade
+
+    scene, _, _ = half_dark_wall()
+    texture = np.full((8, 8, 3), 0.25, np.float32)
+    full, half, none = (layout_shade(scene, None, texture=texture, brightness=b)[:, 4] for b in (1.0, 0.5, 0.0))
+    assert float(full[0]) > 1.5 and torch.allclose(half, full.sqrt()) and bool((none == 1.0).all())
+
+
+def test_exposure_keeps_colours_in_range_and_in_order_and_is_continuous_at_one():
+    """``exposed``: a gain below 1, the luminance to the power 1/e above, so 0..1 stays 0..1 at every exposure in
+    range, each colour grows with the exposure, and the two sides meet at 1 (the colours as they are); lighter
+    keeps an orange's hue and saturation, and nears white only once its red channel reaches 1."""
+    from gt2gs_blender.core.transfer.shade import EXPOSURE_RANGE, exposed
+
+    colours = torch.linspace(0.0, 1.0, 101)[:, None].expand(101, 3)
+    exposures = torch.exp(torch.linspace(math.log(EXPOSURE_RANGE[0]), math.log(EXPOSURE_RANGE[1]), 41))
+    out = torch.stack([exposed(colours, float(e)) for e in exposures])
+    assert bool(((out >= 0) & (out <= 1)).all()) and bool((out.diff(dim=0) >= 0).all())
+    assert bool((out.diff(dim=1) >= 0).all())  # the texture's light and dark keep their order
+    assert torch.equal(exposed(colours, 1.0), colours)
+    assert torch.allclose(exposed(colours, 1.0 - 1e-6), exposed(colours, 1.0 + 1e-6), atol=1e-5)
+    # lighter keeps the hue and saturation (the channels' ratios) until a channel reaches 1, then nears white
+    orange = torch.tensor([[0.4, 0.2, 0.05]])
+    lighter = exposed(orange, 1.5)
+    luma = torch.tensor([0.2126, 0.7152, 0.0722])
+    assert torch.allclose(lighter / lighter.max(), orange / orange.max(), atol=1e-6)
+    assert float(lighter @ luma) == pytest.approx(float(orange @ luma) ** (1 / 1.5), rel=1e-5)
+    whiter = exposed(orange, 5.0)
+    assert float(whiter.max()) == pytest.approx(1.0) and float(whiter @ luma) == pytest.approx(
+        float(orange @ luma) ** 0.2, rel=1e-5
+    )
+
+
+def test_brightness_exposure_meets_the_target_or_stops_at_its_range():
+    """Against an analytic mean: a flat 0.4 texture under a flat shade 0.5 (mix 0.2) and a scene of luminance
+    0.6 is exposed by the power log 0.6 / log 0.2; a black texture and no scene colour cannot brighten, so the
+    exposure stops at the range's top and the result stays black (finite); no weight: 1."""
+    from gt2gs_blender.core.transfer.shade import EXPOSURE_RANGE, brightness_exposure, exposed, kept_scene
+
+    n = 500
+    kept = kept_scene(torch.full((n,), 0.5), torch.zeros(n, 3), 0.0)
+    luminance, weights = torch.full((n,), 0.6), torch.ones(n)
+    e = brightness_exposure(np.full((16, 16, 3), 0.4, np.float32), kept, luminance, weights)
+    assert 1.0 / e == pytest.approx(math.log(0.6) / math.log(0.2), rel=1e-4)
+    assert exposed(torch.full((1, 3), 0.2), e) == pytest.approx(torch.full((1, 3), 0.6), abs=1e-4)
+    black = brightness_exposure(np.zeros((16, 16, 3), np.float32), kept, luminance, weights)
+    assert black == pytest.approx(EXPOSURE_RANGE[1], rel=1e-6) and float(exposed(torch.zeros(1, 3), black).max()) == 0
+    assert brightness_exposure(np.ones((4, 4, 3), np.float32), kept, luminance, torch.zeros(n)) == 1.0
+
+
 def two_hue_wall() -> tuple[GaussianScene, Camera]:
     """The wall pink on its left half and blue on its right, its front camera."""
     base, cam = wall(n=80), front_camera(96)
@@ -487,7 +575,8 @@ def two_hue_wall() -> tuple[GaussianScene, Camera]:
 @pytest.mark.parametrize("colour", [0.3, 1.0, 0.0])
 def test_scene_colour_mixes_each_part_s_own_colour_under_the_texture(shared, tmp_path, colour):
     """A mid-grey texture on the two-hue wall at Keep Scene 1 and Scene Colour ``colour``: each half comes out
-    exactly (1 - colour) x grey x its shade (its luminance over the brighter half's) + colour x its own colour,
+    exactly (1 - colour) x grey x its shade (its luminance over the brighter half's) + colour x its own colour
+    (Scene Brightness 0: the mix as it is),
     on the splats, in the preview and in the layout term's image (0: both halves grey, as the luminance keeps
     them alike; 1: the scene's colours back, no texture)."""
     from gt2gs_blender.core.api import transfer
@@ -495,7 +584,9 @@ def test_scene_colour_mixes_each_part_s_own_colour_under_the_texture(shared, tmp
 
     scene, cam = two_hue_wall()
     grey = np.full((64, 64, 3), 0.5, np.float32)
-    config = zero_step_config(shared, tmp_path, keep_scene=1.0, scene_colour=colour, shade_softness=0.0)
+    config = zero_step_config(
+        shared, tmp_path, keep_scene=1.0, scene_colour=colour, scene_brightness=0.0, shade_softness=0.0
+    )
     result = transfer(scene, grey, [cam], config)
     luma = np.array([0.2126, 0.7152, 0.0722])
     bright = max(float(np.dot(PINK, luma)), float(np.dot(BLUE, luma)))
@@ -520,7 +611,15 @@ def test_a_whole_run_keeps_parts_that_differ_only_in_hue_apart(shared, tmp_path,
 
     scene, cam = two_hue_wall()
     grey = np.full((64, 64, 3), 0.5, np.float32)
-    config = wall_config(shared, tmp_path, stylise_steps=12, correct_steps=4, scene_colour=colour, background=(0, 0, 0))
+    config = wall_config(
+        shared,
+        tmp_path,
+        stylise_steps=12,
+        correct_steps=4,
+        scene_colour=colour,
+        scene_brightness=0.0,
+        background=(0, 0, 0),
+    )
     shown = render(transfer(scene, grey, [cam], config).scene, [cam], background=torch.zeros(3)).colors[0]
     difference = (shown[16:80, 8 : 48 - 8].mean((0, 1)) - shown[16:80, 48 + 8 : 96 - 8].mean((0, 1))).numpy()
     assert difference == pytest.approx(colour * (np.array(PINK) - np.array(BLUE)), abs=0.05)

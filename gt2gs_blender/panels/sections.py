@@ -19,7 +19,7 @@ from typing import Any
 import bpy
 
 from ..blender import machine, textures, transfer_run, views
-from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, keeps_scene, user_settings
+from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
 from ..core.transfer.setting import IN_SCENE, PARTS
 from .sidebar import CATEGORY, LABEL_CHARS, text_lines
 
@@ -36,7 +36,7 @@ SECTION_OF_PART = {
 }
 """Which sub-panel shows the settings of each part of the method."""
 FRONT = {
-    "Texture": ("angle", "texture_repeats", "keep_scene", "scene_colour"),
+    "Texture": ("angle", "texture_repeats", "keep_scene", "scene_colour", "scene_brightness"),
     "Views": ("n_views",),
     "Quality": ("lambda_content",),
 }
@@ -105,7 +105,8 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "layout_projection": lambda s: s.layout,
     "keep_scene": lambda s: s.layout,
     "scene_colour": lambda s: s.layout,
-    "shade_softness": lambda s: s.layout and keeps_scene(s),
+    "scene_brightness": lambda s: s.layout,
+    "shade_softness": lambda s: s.layout and (s.keep_scene > 0 or s.scene_colour > 0),  # what it averages
     "split_size": lambda s: s.layout,
     "split_first": lambda s: s.layout and s.split_size > 0,
     "split_budget": lambda s: s.layout and s.split_size > 0,

@@ -37,6 +37,7 @@ PREVIEWED = (
     "layout_projection",
     "keep_scene",
     "scene_colour",
+    "scene_brightness",
     "shade_softness",
     "texture_repeats",
     "split_size",

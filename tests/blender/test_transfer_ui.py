@@ -553,7 +553,13 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
     listed += [name for section in sections.SECTIONS for name in sections.front_settings(section)]
     assert sorted(listed) == sorted(name for name, _, _ in user_settings(IN_SCENE))  # each exactly once
     # Texture: what an artist sets (what the texture keeps of the scene); the method's texture settings: Advanced
-    assert sections.front_settings("Texture") == ["angle", "texture_repeats", "keep_scene", "scene_colour"]
+    assert sections.front_settings("Texture") == [
+        "angle",
+        "texture_repeats",
+        "keep_scene",
+        "scene_colour",
+        "scene_brightness",
+    ]
     assert sections.section_settings("Texture") == []
     assert {"texture", "gt2"} <= set(dict(sections.section_settings("Advanced")))  # by part: new ones join
     labels = [cls.bl_label for cls in sections.classes]

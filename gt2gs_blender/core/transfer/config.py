@@ -100,18 +100,29 @@ class TransferConfig(MachineSettings):
         "Keep Scene",
         "How much of the scene shows through the laid-out texture: 1 keeps its light and dark, edges and "
         "parts (the texture reads as the surface's material under the capture's own shading, fainter in its "
-        "dark parts); 0 lays the texture's own brightness everywhere, so only the outline shows the scene",
+        "dark parts); 0 lays the texture evenly everywhere, so only the outline shows the scene",
         "texture",
         min=0.0,
         max=1.0,
     )
     scene_colour: float = setting(
-        0.3,
+        0.2,
         "Scene Colour",
         "How much of the capture's own colour shows under the laid-out texture: 0 colours it with the "
-        "texture alone; 0.3 mixes in 30 % of each spot's own colour, so parts that differ only in hue "
+        "texture alone; 0.2 mixes in 20 % of each spot's own colour, so parts that differ only in hue "
         "(pink icing on beige dough, a robot's eyes) stay apart and the capture reads at a glance; 1 keeps "
         "the capture's colours with no texture",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
+    scene_brightness: float = setting(
+        1.0,
+        "Scene Brightness",
+        "How far the laid-out texture takes on the capture's overall brightness: 1 as bright as the capture "
+        "on average (a dim room stays dim, a white object stays light, colours keep their hue); 0 the texture's "
+        "own brightness under the kept light and dark (darker than the capture where the texture is darker "
+        "than white)",
         "texture",
         min=0.0,
         max=1.0,
@@ -485,6 +496,5 @@ _HINTS = get_type_hints(TransferConfig)
 
 
 def keeps_scene(config: TransferConfig) -> bool:
-    """Whether the laid-out texture keeps anything of the scene under it (its light and dark, or its colour);
-    also asked of Blender's scene settings, which have the same names."""
-    return config.keep_scene > 0 or config.scene_colour > 0
+    """Whether the laid-out texture keeps anything of the scene under it (its light and dark, colour or brightness)."""
+    return config.keep_scene > 0 or config.scene_colour > 0 or config.scene_brightness > 0

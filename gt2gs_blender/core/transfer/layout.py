@@ -275,13 +275,15 @@ def layout_images(
     softness: float = 0.0,
     keep: float = 1.0,
     colour: float = 0.0,
+    exposure: float = 1.0,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
     ``shaded``: over the view's own scene as the layout lays it (:func:`under_scene`): its colour averaged over
     the surface points within about ``softness`` (a world length, by :func:`spatial_blur`), the texture times
-    that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in."""
+    that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in, the mix at the
+    splats' ``exposure`` (:func:`laid_exposure`)."""
     images = []
     for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
@@ -295,7 +297,7 @@ def layout_images(
             seen = (premultiplied.cpu()[covered].float() / weight[:, None]).clamp(0.0, 1.0)
             if softness > 0:  # the same average as the splats' shade
                 seen = torch.stack([spatial_blur(points, seen[:, c], weight, softness) for c in range(3)], dim=1)
-            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep), seen, colour)
+            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep), seen, colour, exposure)
             colours = under_scene(colours, kept)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
@@ -407,13 +409,15 @@ def lay_out(
 
 
 def layout_shading(
-    scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig
+    scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig, texture: np.ndarray
 ) -> torch.Tensor | None:
-    """What of the scene a run with ``config`` lays the texture over (:func:`layout_shade`, ``shade_softness``
-    repeats of ``frame``, ``keep_scene``, ``scene_colour``), or None when it keeps the texture's own colours."""
+    """What of the scene a run with ``config`` lays ``texture`` over (:func:`layout_shade`, ``shade_softness``
+    repeats of ``frame``, ``keep_scene``, ``scene_colour``, ``scene_brightness``), or None when it keeps the
+    texture's own colours."""
     if not keeps_scene(config):
         return None
-    return layout_shade(scene, rows, shade_width(frame, config), config.keep_scene, config.scene_colour)
+    width = shade_width(frame, config)
+    return layout_shade(scene, rows, width, config.keep_scene, config.scene_colour, texture, config.scene_brightness)
 
 
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:

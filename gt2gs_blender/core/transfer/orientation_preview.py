@@ -122,7 +122,7 @@ def laid_out_start(plan: RunPlan) -> GaussianScene:
     same children); hidden splats keep their colours, as the run keeps them."""
     config, frame, texture = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
-    shade = layout_shading(work, region, frame, config)
+    shade = layout_shading(work, region, frame, config, texture)
     laid = lay_out(work, region, plan.content, texture, frame, config, shade)
     if config.split_size > 0:
         laid, region = add_detail(laid, laid.base_colors, region, plan.content, texture, frame, config, shade)

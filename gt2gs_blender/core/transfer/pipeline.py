@@ -34,6 +34,7 @@ from .metrics import COVERED, preview_ssim
 from .orientation_preview import show
 from .plan import RunPlan, plan_run
 from .region import assemble, structure_changed
+from .shade import laid_exposure
 from .skips import Plateau
 from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture_bank import TextureBank, compact_bank
@@ -173,7 +174,7 @@ def _transfer(
     config, frame, image = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
     # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
-    shade = layout_shading(work, region, frame, config) if frame is not None and config.layout else None
+    shade = layout_shading(work, region, frame, config, image) if frame is not None and config.layout else None
     if config.color_transfer:
         work = apply_color_transfer(work, plan.content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -190,12 +191,19 @@ def _transfer(
             work, region, shade = split_for_detail(work, region, shade, frame, config)
         work = lay_out(work, region, plan.content, image, frame, config, shade)
         projected, split = config.layout_projection, len(work) - n_work
-        laid_out = {"projection": projected, "repeat_world": frame.repeat, "splats": len(work), "split": split}
+        exposure = 1.0 if shade is None else laid_exposure(shade, region)
+        laid_out = {
+            "projection": projected,
+            "repeat_world": frame.repeat,
+            "splats": len(work),
+            "split": split,
+            "exposure": exposure,  # Scene Brightness: below 1 a gain, above the power 1 / exposure
+        }
     targets = view_targets(plan.used, work, extractor, config, config.backend)
     if frame is not None and config.layout and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
         ideal = layout_images(
-            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour
+            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour, exposure
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()

@@ -1,13 +1,19 @@
-"""The scene kept under the laid-out texture (``keep_scene``, ``scene_colour``): its light and dark, edges,
-parts and colours.
+"""The scene kept under the laid-out texture (``keep_scene``, ``scene_colour``, ``scene_brightness``): its light
+and dark, edges, parts, colours and overall brightness.
 
 Laid over a whole capture, the plain texture hid the scene (the fern's SSIM to the original fell from 0.49
-to 0.05). Each splat keeps two things of the scene (``layout_shade``, one (N, 4) row per splat):
+to 0.05). Each splat keeps three things of the scene (``layout_shade``, one (N, 5) row per splat):
 - its shade: its own original luminance over the bright end of the scene's, to the power ``keep_scene`` (0:
   the texture's own brightness everywhere; 1: the texture times the scene's luminance, an albedo under the
   capture's own shading);
 - a share ``scene_colour`` of its own colour mixed under the shaded texture, so parts that differ in hue only
-  (a donut's pink icing and beige dough, a robot's red eyes in a grey face) stay apart.
+  (a donut's pink icing and beige dough, a robot's red eyes in a grey face) stay apart;
+- the scene's overall brightness: one exposure for the whole run (``brightness_exposure``), so the mix's mean
+  luminance is the scene's (``scene_brightness`` 1). Shaded by the scene's luminance over its bright end, a
+  texture darker than white came out darker than the capture, a white one lighter. Lighter goes by a power
+  (``mix^(1/e)`` maps 0..1 onto itself, so a light object brightens without clipping: a gain clipped the donut's
+  icing), darker by a gain (``e * mix``: the kept light and dark keep their ratios; a power cannot darken
+  white, and crushed the rest to black); both keep the texture's light and dark in order.
 ``under_scene`` is the one rule that applies them, to the splats, the layout term's images and the sketch
 preview alike. The row follows each splat through densification (an optimiser attachment) to the detail
 split's children.
@@ -20,6 +26,8 @@ from __future__ import annotations
 
 import math
 
+import cv2
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -42,6 +50,15 @@ SPATIAL_BOUNDS_MARGIN = 3.0
 beyond (floaters) read the grid's border."""
 SPATIAL_BOUNDS_SAMPLE = 1_000_000
 """The bounds' quantiles come from at most about this many of the points (torch.quantile's size limit)."""
+EXPOSURE_RANGE = (0.2, 5.0)
+"""The exposure stays within these: a gain of 0.2 at the darkest, the power 1/5 at the lightest (a black
+texture on a white scene asks for more, and would get a grey wash)."""
+EXPOSURE_SPLATS = 1024
+EXPOSURE_TEXELS = 32
+""":func:`brightness_exposure` averages over at most this many splats and the texture at this many texels a side
+(area-averaged, as the layout prefilters it to a splat's footprint): the mean is all it needs."""
+EXPOSURE_STEPS = 32
+"""Bisection steps on the exposure's logarithm (its range over 2^32: far below a grey level)."""
 
 
 def layout_shade(
@@ -50,11 +67,14 @@ def layout_shade(
     softness: float = 0.0,
     keep: float = 1.0,
     colour: float = 0.0,
+    texture: np.ndarray | None = None,
+    brightness: float = 0.0,
 ) -> torch.Tensor:
-    """(N, 4) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
-    averaged over its neighbours within about ``softness`` (a world length, 0: its own), and that colour's
-    luminance over the bright end of those splats', to the power ``keep`` (:func:`shading`); the other splats
-    keep the texture as it is."""
+    """(N, 5) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
+    averaged over its neighbours within about ``softness`` (a world length, 0: its own), that colour's
+    luminance over the bright end of those splats', to the power ``keep`` (:func:`shading`), and ``brightness``
+    of the exposure that gives ``texture`` laid over them the scene's mean luminance (:func:`brightness_exposure`,
+    in stops); the other splats keep the texture as it is."""
     colours = scene.base_colors.detach().clamp(0.0, 1.0)
     kept = kept_scene(torch.ones(len(scene), dtype=scene.dtype, device=scene.device), colours, 0.0)
     part = slice(None) if rows is None else rows
@@ -65,21 +85,108 @@ def layout_shade(
         points, weights = scene.means.detach()[part], scene.opacities.detach()[part]
         seen = torch.stack([spatial_blur(points, seen[:, c], weights, softness) for c in range(3)], dim=1)
     luminance = seen @ torch.tensor(LUMA, dtype=seen.dtype, device=seen.device)
-    kept[part] = kept_scene(shading(luminance, keep=keep), seen, colour)
+    mixed = kept_scene(shading(luminance, keep=keep), seen, colour)
+    if texture is not None and brightness > 0:
+        weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
+        mixed[:, 4] = brightness_exposure(texture, mixed, luminance, weights) ** brightness
+    kept[part] = mixed
     return kept
 
 
-def kept_scene(shade: torch.Tensor, colours: torch.Tensor, colour: float) -> torch.Tensor:
-    """(N, 4): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the scene's
-    own ``colours`` (N, 3) is mixed under it, then that colour's share: what :func:`under_scene` applies."""
-    return torch.cat([(1.0 - colour) * shade[:, None], colour * colours.to(shade)], dim=1)
+def coverage_weights(scales: torch.Tensor, opacities: torch.Tensor) -> torch.Tensor:
+    """(N,) how much of a view each splat covers, roughly: its opacity times the area of its two largest axes
+    (``scales`` (N, 3)), capped at their 99th percentile, so a few huge background splats do not outweigh the
+    object."""
+    ordered = scales.float().sort(dim=1).values
+    area = ordered[:, 1] * ordered[:, 2]
+    if len(area) > 1:
+        area = area.clamp(max=float(torch.quantile(area[:: max(1, len(area) // SPATIAL_BOUNDS_SAMPLE)], 0.99)))
+    return opacities.float().reshape(-1) * area
+
+
+def brightness_exposure(
+    texture: np.ndarray, kept: torch.Tensor, luminance: torch.Tensor, weights: torch.Tensor
+) -> float:
+    """The exposure (:func:`exposed`) that gives ``texture`` (H, W, 3 in 0..1) laid over ``kept`` (N, 5,
+    :func:`under_scene`, its exposure ignored) the ``weights``-averaged mean of the scene's ``luminance`` (N,):
+    every splat paired with every texel of the texture area-averaged to ``EXPOSURE_TEXELS`` a side, as a layout
+    tiling the surface samples it. 1 when nothing is weighed."""
+    step = max(1, len(kept) // EXPOSURE_SPLATS)
+    rows, w = kept[::step, :4].float().cpu(), weights[::step].float().cpu().clamp_min(0.0)
+    if not len(rows) or float(w.sum()) <= 0:
+        return 1.0
+    w = w / w.sum()
+    target = float(w @ luminance[::step].float().cpu().clamp(0.0, 1.0))
+    side = (EXPOSURE_TEXELS, EXPOSURE_TEXELS)
+    small = cv2.resize(np.asarray(texture[..., :3], np.float32), side, interpolation=cv2.INTER_AREA)
+    texels = torch.from_numpy(small.reshape(-1, 3))
+    mixed = (texels[None] * rows[:, None, :1] + rows[:, None, 1:4]).clamp(0.0, 1.0)  # (splats, texels, 3)
+    luminance = mixed @ torch.tensor(LUMA)
+
+    def mean_luminance(log_exposure: float) -> float:
+        return float(w @ exposed_luminance(luminance, math.exp(log_exposure)).mean(dim=1))
+
+    low, high = (math.log(e) for e in EXPOSURE_RANGE)
+    for _ in range(EXPOSURE_STEPS):  # the mean luminance grows with the exposure
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if mean_luminance(mid) < target else (low, mid)
+    return math.exp(0.5 * (low + high))
+
+
+def exposed(colours: torch.Tensor, exposure: torch.Tensor | float) -> torch.Tensor:
+    """``colours`` (..., 3 in 0..1) at ``exposure`` (a float, or one per row broadcast against them): darker by
+    the gain ``e`` below 1; lighter above, to the luminance ``Y^(1/e)`` with the hue and saturation kept (a power
+    per channel washed colours out), nearing white only where a channel would pass 1 (:func:`lit`). Nothing
+    leaves 0..1, the order of light and dark is kept, and 1 leaves the colours as they are."""
+    exposure = torch.as_tensor(exposure, dtype=colours.dtype, device=colours.device)
+    inside = colours.clamp(0.0, 1.0)
+    luminance = inside @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+    wanted = exposed_luminance(luminance, exposure.squeeze(-1).clamp_min(1.0))
+    return torch.where(exposure <= 1.0, colours * exposure, lit(inside, luminance, wanted))
+
+
+def exposed_luminance(luminance: torch.Tensor, exposure: torch.Tensor | float) -> torch.Tensor:
+    """The luminance :func:`exposed` gives colours of ``luminance`` (in 0..1): ``e * Y`` below 1, ``Y^(1/e)``
+    above."""
+    exposure = torch.as_tensor(exposure, dtype=luminance.dtype, device=luminance.device)
+    lighter = luminance.clamp(0.0, 1.0).pow(1.0 / exposure.clamp_min(1.0))
+    return torch.where(exposure <= 1.0, luminance * exposure, lighter)
+
+
+def lit(colours: torch.Tensor, luminance: torch.Tensor, wanted: torch.Tensor) -> torch.Tensor:
+    """``colours`` (..., 3 in 0..1, of ``luminance``) brought to the higher luminance ``wanted``: scaled (hue and
+    saturation kept) as far as the brightest channel allows, then mixed toward white for the rest."""
+    luma = torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+    scaled = colours * (wanted / luminance.clamp_min(1e-12))[..., None]
+    fitted = scaled / scaled.amax(dim=-1, keepdim=True).clamp_min(1.0)
+    short = ((wanted - fitted @ luma) / (1.0 - fitted @ luma).clamp_min(1e-12)).clamp(0.0, 1.0)
+    return fitted + short[..., None] * (1.0 - fitted)
+
+
+def kept_scene(shade: torch.Tensor, colours: torch.Tensor, colour: float, exposure: float = 1.0) -> torch.Tensor:
+    """(N, 5): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the scene's
+    own ``colours`` (N, 3) is mixed under it, that colour's share, and the mix's exposure (the scene's
+    brightness, :func:`exposed`): what :func:`under_scene` applies."""
+    exposures = torch.full_like(shade[:, None], exposure)
+    return torch.cat([(1.0 - colour) * shade[:, None], colour * colours.to(shade), exposures], dim=1)
 
 
 def under_scene(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
-    """(N, 3) ``texture`` colours laid over the scene ``kept`` (N, 4) row by row (:func:`kept_scene`): the
-    shaded texture plus the mixed-in share of the scene's own colour."""
+    """(N, 3) ``texture`` colours laid over the scene ``kept`` (N, 5) row by row (:func:`kept_scene`): the
+    shaded texture plus the mixed-in share of the scene's own colour, at the row's exposure (:func:`exposed`)."""
     kept = kept.to(texture)
-    return texture * kept[:, :1] + kept[:, 1:]
+    mixed = texture * kept[:, :1] + kept[:, 1:4]
+    exposures = kept[:, 4:]
+    if bool((exposures == 1.0).all()):
+        return mixed
+    return exposed(mixed, exposures)
+
+
+def laid_exposure(kept: torch.Tensor, rows: torch.Tensor | None) -> float:
+    """The exposure ``kept`` (:func:`layout_shade`) gives the texture laid on ``rows`` (all when None): one for
+    the whole run, which the layout term's images take too."""
+    laid = kept if rows is None else kept[rows]
+    return float(laid[0, 4]) if len(laid) else 1.0
 
 
 def spatial_blur(points: torch.Tensor, values: torch.Tensor, weights: torch.Tensor, sigma: float) -> torch.Tensor:
