@@ -550,7 +550,8 @@ def test_exposure_keeps_colours_in_range_and_in_order_and_is_continuous_at_one()
 def test_brightness_exposure_meets_the_target_or_stops_at_its_range():
     """Against an analytic mean: a flat 0.4 texture under a flat shade 0.5 (mix 0.2) and a scene of luminance
     0.6 is exposed by the power log 0.6 / log 0.2; a black texture and no scene colour cannot brighten, so the
-    exposure stops at the range's top and the result stays black (finite); no weight: 1."""
+    exposure stops at the range's top and the result stays black (finite); a black scene stops it at the range's
+    bottom; no weight: 1."""
     from gt2gs_blender.core.transfer.shade import EXPOSURE_RANGE, brightness_exposure, exposed, kept_scene
 
     n = 500
@@ -561,6 +562,8 @@ def test_brightness_exposure_meets_the_target_or_stops_at_its_range():
     assert exposed(torch.full((1, 3), 0.2), e) == pytest.approx(torch.full((1, 3), 0.6), abs=1e-4)
     black = brightness_exposure(np.zeros((16, 16, 3), np.float32), kept, luminance, weights)
     assert black == pytest.approx(EXPOSURE_RANGE[1], rel=1e-6) and float(exposed(torch.zeros(1, 3), black).max()) == 0
+    dark = brightness_exposure(np.ones((4, 4, 3), np.float32), kept, torch.zeros(n), weights)  # a black scene
+    assert dark == pytest.approx(EXPOSURE_RANGE[0], rel=1e-6)
     assert brightness_exposure(np.ones((4, 4, 3), np.float32), kept, luminance, torch.zeros(n)) == 1.0
 
 
