@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import dataclass
@@ -43,9 +42,8 @@ import recognise_measure as measure
 from recognise_scenes import layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.transfer.shade import (
-    EXPOSURE_RANGE,
     exposed,
-    exposed_luminance,
+    exposure_for,
     kept_scene,
     shading,
     under_scene,
@@ -91,16 +89,6 @@ RULES = (
 )
 
 
-def exposure_match(out: torch.Tensor, target: float, luma: torch.Tensor) -> float:
-    """The exposure (the engine's :func:`exposed`) that gives ``out`` (RGB in 0..1) the mean luminance ``target``."""
-    luminance = out @ luma
-    low, high = (math.log(e) for e in EXPOSURE_RANGE)
-    for _ in range(40):
-        mid = 0.5 * (low + high)
-        low, high = (mid, high) if float(exposed_luminance(luminance, math.exp(mid)).mean()) < target else (low, mid)
-    return math.exp(0.5 * (low + high))
-
-
 def compose(
     rule: Rule, texture: np.ndarray, surface: np.ndarray, original: np.ndarray, alpha: np.ndarray, background
 ) -> np.ndarray:
@@ -121,9 +109,8 @@ def compose(
     if rule.matched:
         out = out * float(y.mean()) / max(float((out @ luma).mean()), 1e-6)
     if rule.brightness > 0:
-        out = exposed(
-            out.clamp(0.0, 1.0), exposure_match(out.clamp(0.0, 1.0), float(y.mean()), luma) ** rule.brightness
-        )
+        out = out.clamp(0.0, 1.0)
+        out = exposed(out, exposure_for(out @ luma, float(y.mean())) ** rule.brightness)
     over = original.copy()
     shown = out.clamp(0.0, 1.0) * a[inside] + (1 - a[inside]) * bg
     over[covered] = (shown.numpy() * 255 + 0.5).astype(np.uint8)

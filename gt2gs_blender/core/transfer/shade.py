@@ -121,15 +121,20 @@ def brightness_exposure(
     small = cv2.resize(np.asarray(texture[..., :3], np.float32), side, interpolation=cv2.INTER_AREA)
     texels = torch.from_numpy(small.reshape(-1, 3))
     mixed = (texels[None] * rows[:, None, :1] + rows[:, None, 1:4]).clamp(0.0, 1.0)  # (splats, texels, 3)
-    luminance = mixed @ torch.tensor(LUMA)
+    return exposure_for(mixed @ torch.tensor(LUMA), target, w)
 
-    def mean_luminance(log_exposure: float) -> float:
-        return float(w @ exposed_luminance(luminance, math.exp(log_exposure)).mean(dim=1))
 
+def exposure_for(luminance: torch.Tensor, target: float, weights: torch.Tensor | None = None) -> float:
+    """The exposure (within ``EXPOSURE_RANGE``) at which :func:`exposed_luminance` of ``luminance`` (rows, samples)
+    averages ``target``, the rows weighted by ``weights`` (summing to 1; None: alike): bisection on its log, as the
+    mean grows with the exposure."""
+    rows = luminance.reshape(len(luminance), -1)
+    w = torch.full((len(rows),), 1.0 / max(len(rows), 1)) if weights is None else weights.to(rows)
     low, high = (math.log(e) for e in EXPOSURE_RANGE)
-    for _ in range(EXPOSURE_STEPS):  # the mean luminance grows with the exposure
+    for _ in range(EXPOSURE_STEPS):
         mid = 0.5 * (low + high)
-        low, high = (mid, high) if mean_luminance(mid) < target else (low, mid)
+        mean = float(w @ exposed_luminance(rows, math.exp(mid)).mean(dim=1))
+        low, high = (mid, high) if mean < target else (low, mid)
     return math.exp(0.5 * (low + high))
 
 
