@@ -14,7 +14,11 @@ Rules (``T``: texture RGB, ``Y``: the original's luminance per pixel, over the o
 - ``matched``: the composite scaled by a gain so its mean luminance is the original's (the scene's own
   brightness, which SSIM's luminance term compares; the structure measures divide it out): clips on a light object;
 - *Scene Brightness* b: the composite at ``b`` of the exposure that gives it the original's mean luminance
-  (the engine's ``exposed``: a gain to darken, a power to lighten, so nothing clips).
+  (the engine's ``exposed``: a gain to darken, a power to lighten, so nothing clips);
+- ``blur``: the texture's finest grain softened first (a Gaussian of that many pixels of the held-out view, within
+  the surface), so the scene's own fine detail is all the composite has at that scale;
+- ``log_contrast``: the texture's spread of log luminance set to this first (hue kept; a faint wood raised, a
+  stark pattern lowered), so every texture competes with the scene's light and dark alike.
 
     python bench/keep_frontier.py --scenes fern donut
 
@@ -30,6 +34,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import cv2
 import numpy as np
 import torch
 
@@ -42,6 +47,7 @@ import recognise_measure as measure
 from recognise_scenes import layout_surface, load_bench_scene, run_start
 
 from gt2gs_blender.core.transfer.shade import (
+    SHADE_MIN,
     exposed,
     exposure_for,
     kept_scene,
@@ -60,6 +66,8 @@ class Rule:
     contrast: float = 1.0
     matched: bool = False
     brightness: float = 0.0
+    blur: float = 0.0
+    log_contrast: float = 0.0
 
 
 RULES = (
@@ -86,6 +94,26 @@ RULES = (
     Rule("Keep Scene 0.75, Scene Brightness 1", 0.75, 0.0, brightness=1.0),
     Rule("Keep Scene 0.75, Scene Colour 0.15, Scene Brightness 1", 0.75, 0.15, brightness=1.0),
     Rule("Keep Scene 0.75, Scene Colour 0.2, Scene Brightness 1", 0.75, 0.2, brightness=1.0),
+    Rule(
+        "Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, log contrast 0.45",
+        1.0,
+        0.2,
+        brightness=1.0,
+        log_contrast=0.45,
+    ),
+    Rule(
+        "Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, log contrast 0.6",
+        1.0,
+        0.2,
+        brightness=1.0,
+        log_contrast=0.6,
+    ),
+    Rule("Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, blur 1 px", 1.0, 0.2, brightness=1.0, blur=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, blur 1.5 px", 1.0, 0.2, brightness=1.0, blur=1.5),
+    Rule("Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, blur 1 px", 1.0, 0.1, brightness=1.0, blur=1.0),
+    Rule("Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, blur 1.5 px", 1.0, 0.1, brightness=1.0, blur=1.5),
+    Rule("Keep Scene 0.75, Scene Colour 0.1, Scene Brightness 1, blur 1 px", 0.75, 0.1, brightness=1.0, blur=1.0),
+    Rule("Keep Scene 0.5, Scene Colour 0.2, Scene Brightness 1, blur 1 px", 0.5, 0.2, brightness=1.0, blur=1.0),
 )
 
 
@@ -99,11 +127,15 @@ def compose(
     bg = torch.tensor(background, dtype=torch.float32)
     t, o = (torch.from_numpy(x.astype(np.float32) / 255.0) for x in (texture, original))
     t, o = ((x - (1 - a) * bg) / a.clamp_min(1e-3) for x in (t, o))  # un-composited from the background
+    if rule.blur > 0:
+        t = blurred(t, covered, rule.blur)
     inside = torch.from_numpy(covered)
     t, o = t[inside], o[inside].clamp(0.0, 1.0)
     luma = torch.tensor(measure.LUMA)
     mean = float((t @ luma).mean())
     t = mean + rule.contrast * (t - mean)
+    if rule.log_contrast > 0:
+        t = with_log_contrast(t, rule.log_contrast)
     y = o @ luma
     out = under_scene(t, kept_scene(shading(y, keep=rule.keep), o, rule.colour))
     if rule.matched:
@@ -115,6 +147,27 @@ def compose(
     shown = out.clamp(0.0, 1.0) * a[inside] + (1 - a[inside]) * bg
     over[covered] = (shown.numpy() * 255 + 0.5).astype(np.uint8)
     return over
+
+
+def blurred(image: torch.Tensor, covered: np.ndarray, sigma: float) -> torch.Tensor:
+    """(H, W, 3) ``image`` blurred by ``sigma`` pixels over the ``covered`` pixels only (normalised by their own
+    blurred coverage, so the background does not bleed in)."""
+    mask = covered.astype(np.float32)
+    weight = cv2.GaussianBlur(mask, (0, 0), sigma)[..., None]
+    soft = cv2.GaussianBlur(image.numpy() * mask[..., None], (0, 0), sigma) / np.maximum(weight, 1e-3)
+    return torch.from_numpy(np.where(weight > 1e-3, soft, image.numpy()).astype(np.float32))
+
+
+def with_log_contrast(texture: torch.Tensor, spread: float) -> torch.Tensor:
+    """(N, 3) ``texture`` with the standard deviation of its log luminance scaled to ``spread`` about its
+    geometric mean, hue kept, its mean luminance as before (clipped to 0..1)."""
+    luma = torch.tensor(measure.LUMA)
+    y = (texture @ luma).clamp_min(SHADE_MIN)
+    log = y.log()
+    centre = log.mean()
+    wanted = centre + (log - centre) * (spread / max(float(log.std()), 1e-6))
+    out = texture * (wanted - log).exp()[:, None]
+    return (out * float(y.mean()) / max(float((out @ luma).mean()), 1e-6)).clamp(0.0, 1.0)
 
 
 def main() -> None:
