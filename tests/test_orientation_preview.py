@@ -5,13 +5,16 @@ Its latency (the issue's budget: 2 s at 256 px on the CPU) is measured by bench/
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
 
 from gt2gs_blender.core.cameras.generate import look_at
 from gt2gs_blender.core.scene.gaussians import GaussianScene
-from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, texture_layer
+from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, preview, texture_layer
+from gt2gs_blender.core.transfer.presets import preset
 
 
 def wall(n_side: int = 60, tilt: float = 0.0) -> GaussianScene:
@@ -111,3 +114,16 @@ def test_preview_at_the_default_size_is_an_image_of_the_wall():
     image = orientation_preview(scene, stripes, cam, 45.0)
     assert image.shape == (256, 256, 3) and image.dtype == np.uint8
     assert centre(image).astype(np.float64).mean(axis=-1).std() > 20.0  # the stripes show, not a flat wall
+
+
+def test_preview_lays_the_softened_texture_its_stripes_fainter_as_a_gaussian_blur_makes_them():
+    """Texture Softness reaches what the run lays: a sinusoid of period P under a Gaussian of sigma keeps
+    exp(-2 pi^2 sigma^2 / P^2) of its amplitude (the analytic oracle), 0.60 at 0.02 of a 128 px texture."""
+    stripes, cam = horizontal_stripes(128, 16), front_camera()
+    config = preset("preview", layout=False, texture_repeats=0.0, texture_height=256, keep_scene=0.0, scene_colour=0.0)
+    sharp, soft = (
+        centre(preview(wall(), stripes, [cam], replace(config, texture_softness=share)).image).astype(np.float64)
+        for share in (0.0, 0.02)
+    )
+    kept = np.exp(-2.0 * np.pi**2 * (0.02 * 128) ** 2 / 16**2)
+    assert soft.std() / sharp.std() == pytest.approx(kept, abs=0.05)

@@ -39,6 +39,7 @@ PREVIEWED = (
     "scene_colour",
     "scene_brightness",
     "shade_softness",
+    "texture_softness",
     "texture_repeats",
     "split_size",
     "split_budget",

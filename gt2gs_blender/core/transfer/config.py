@@ -137,6 +137,17 @@ class TransferConfig(MachineSettings):
         min=0.0,
         max=1.0,
     )
+    texture_softness: float = setting(
+        0.0,
+        "Texture Softness",
+        "Softens the texture's finest grain before it is laid on, over this share of one repeat: 0.01 smooths "
+        "a photo's speckle and noise away, so the capture's own edges stay readable under the planks, bricks "
+        "and cells; 0 uses the photo as it is",
+        "texture",
+        min=0.0,
+        max=0.1,
+        soft_max=0.05,
+    )
     texture_repeats: float = setting(
         0.0,
         "Texture Repeats",

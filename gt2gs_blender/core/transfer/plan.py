@@ -31,7 +31,7 @@ from .layout import LayoutFrame, layout_frame, projection, texture_height_for
 from .region import region_mask, stylise_start, visible_rows
 from .skips import redundant_views
 from .stylise import moves_splats
-from .texture import load_texture
+from .texture import load_texture, softened
 from .views import ViewSet, fit_cameras
 
 RESOLVED = ("up", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
@@ -94,6 +94,7 @@ def plan_run(
     second), and leaves the depth ratio as asked then."""
     device = resolve_device(config.device)
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else _texture_array(texture)
+    image = softened(image, config.texture_softness)
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
     framed = original if selected is None else original.subset(selected)
