@@ -3,7 +3,8 @@
 Every field of :class:`TransferConfig` carries a :class:`Setting` (label, one-line help in an artist's words,
 unit, range or choices, the part of the method it belongs to), which also validates it. The command line's
 flags, the Blender panel's properties and tooltips, and the panel-to-config map are generated from these, so a
-new setting is written once, here. The paper's value of a setting is read from the ``paper-llff`` preset.
+new setting is written once, here (the machine's and the speed settings in their own bases, ``machine.py`` and
+``speed.py``). The paper's value of a setting is read from the ``paper-llff`` preset.
 """
 
 from __future__ import annotations
@@ -12,7 +13,6 @@ from collections.abc import Iterator
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any, get_args, get_type_hints
 
-from .machine import MachineSettings
 from .setting import (
     DEGREES,
     PARTS,
@@ -23,20 +23,22 @@ from .setting import (
     setting,
     value_type,
 )
+from .speed import SpeedSettings
 
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows (the authors' fixed one): deeper scenes keep it, not a smudge."""
 FORWARD_SPREAD_DEG = 45.0
+"""Views all within this angle of their mean direction are a capture seen from the front (the Auto choices)."""
 PRUNE_SCREEN_RADIUS = 20.0
 PRUNE_WORLD_SCALE = 0.2
 """Prune Large Splats' limits: a screen radius in pixels and a share of the views' extent (the authors'
 ``densify_and_prune(..., 20)`` and ``0.2 * extent``)."""
-"""Views all within this angle of their mean direction are a capture seen from the front (the Auto choices)."""
 
 
 @dataclass(frozen=True)
-class TransferConfig(MachineSettings):
-    """Every setting of a transfer run (the machine's first). Loss weights follow the paper's names (lambda_*)."""
+class TransferConfig(SpeedSettings):
+    """Every setting of a transfer run (the machine's and the speed settings first, from the bases). Loss weights
+    follow the paper's names (lambda_*)."""
 
     # -- views
     resolution: int = setting(
@@ -66,17 +68,6 @@ class TransferConfig(MachineSettings):
     )
     background: tuple[float, float, float] = setting(
         (1.0, 1.0, 1.0), "Background", "Colour behind the object in the working views", "views", min=0.0, max=1.0
-    )
-    drop_views: bool = setting(
-        False, "Drop Redundant Views", "Leave out views that show almost nothing the others do not", "speed"
-    )
-    min_new_coverage: float = setting(
-        0.02,
-        "New Coverage",
-        "A view is redundant when it adds less than this share of unseen pixels",
-        "speed",
-        min=0.0,
-        max=1.0,
     )
     # -- texture
     layout: bool = setting(
@@ -228,27 +219,6 @@ class TransferConfig(MachineSettings):
         min=0.0,
         max=1.0,
     )
-    adaptive_angles: bool = setting(
-        False, "Adaptive Rotations", "Fewer rotations for a texture with no strong direction", "speed"
-    )
-    dedup_threshold: float = setting(
-        0.0,
-        "Deduplicate Bank",
-        "Drop near-identical bank entries above this similarity (0 = keep all)",
-        "speed",
-        min=0.0,
-        max=1.0,
-    )
-    match_channels: int = setting(
-        64,
-        "Matching Channels",
-        "Match texture features on this many principal components (0 = all channels)",
-        "speed",
-        min=0,
-        soft_max=256,
-        switch=("--full-matching", 0, "match on all channels, not 64 principal components"),
-    )
-    bank_cache: bool = setting(True, "Cache Texture Banks", "Keep texture banks on disk for the next run", "speed")
     # -- stylise
     stylise_steps: int = setting(
         200,
@@ -408,56 +378,6 @@ class TransferConfig(MachineSettings):
         "Keep Original Needles",
         "Tolerate each splat's own starting ratio if larger: only needles the stylisation makes are penalised",
         "gpb",
-    )
-    # -- speed
-    skip_hidden: bool = setting(
-        True, "Skip Hidden Splats", "Leave splats no view sees out of the optimisation (same result, faster)", "speed"
-    )
-    hidden_threshold: float = setting(
-        0.1,
-        "Hidden Below",
-        "A splat is hidden when all views together show less than this many pixels of it",
-        "speed",
-        unit="px",
-        min=0.0,
-        soft_max=10.0,
-    )
-    skip_sh: bool = setting(
-        True,
-        "Skip Unused SH Bands",
-        "Render the original only up to its highest spherical-harmonic band in use",
-        "speed",
-    )
-    reuse_weights: bool = setting(
-        True,
-        "Reuse Still Renders",
-        "While the splats hold still, redraw each view from its compositing weights kept in memory "
-        "(same result, faster)",
-        "speed",
-    )
-    plateau_window: int = setting(
-        16,
-        "Plateau Window",
-        "Stop a phase when the mean loss of this many steps stops falling (0 = run all)",
-        "speed",
-        unit="steps",
-        min=0,
-        soft_max=100,
-        switch=("--no-plateau-stop", 0, "run every step of every phase"),
-    )
-    plateau_tol: float = setting(
-        0.01,
-        "Plateau Tolerance",
-        "A phase has stopped falling when its loss drops by less than this fraction",
-        "speed",
-        min=0.0,
-        max=1.0,
-    )
-    reuse_content: bool = setting(
-        True, "Reuse Content Renders", "Reuse the last run's renders of the original (same scene and views)", "speed"
-    )
-    evaluate: bool = setting(
-        True, "Measure Result", "Measure consistency, content and texture match at the end", "speed"
     )
     preview_every: int = setting(10, "Preview Every", "Steps between preview frames", "stylise", min=1, internal=True)
 
