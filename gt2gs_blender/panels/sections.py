@@ -36,7 +36,7 @@ SECTION_OF_PART = {
 }
 """Which sub-panel shows the settings of each part of the method."""
 FRONT = {
-    "Texture": ("angle", "texture_repeats", "keep_scene", "scene_colour", "scene_brightness"),
+    "Texture": ("angle", "texture_repeats", "texture_softness", "keep_scene", "scene_colour", "scene_brightness"),
     "Views": ("n_views",),
     "Quality": ("lambda_content",),
 }

@@ -556,6 +556,7 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
     assert sections.front_settings("Texture") == [
         "angle",
         "texture_repeats",
+        "texture_softness",
         "keep_scene",
         "scene_colour",
         "scene_brightness",
@@ -582,6 +583,7 @@ def test_automatic_settings_show_the_value_a_run_uses():
     assert effective_text("layout_projection", "auto", {"front": False}) == "Uses Box: the views surround it"
     assert effective_text("stylise_geometry", "auto", {"front": None}) is None  # no views to tell yet
     assert effective_text("stylise_geometry", "off", {"front": True}) is None
+    assert effective_text("texture_softness", 0.0) == "At 0: the photo as it is"
 
 
 def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
