@@ -459,7 +459,9 @@ def test_shade_softness_blurs_the_scene_s_light_and_shade_over_a_world_width(sha
     from gt2gs_blender.core.transfer.orientation_preview import preview
 
     scene, cam, white = half_dark_wall()
-    config = zero_step_config(shared, tmp_path, scene_colour=0.0, scene_brightness=0.0, shade_softness=0.1)
+    config = zero_step_config(
+        shared, tmp_path, keep_scene=1.0, scene_colour=0.0, scene_brightness=0.0, shade_softness=0.1
+    )
     result = transfer(scene, white, [cam], config)
     colours, x = result.scene.base_colors.mean(1), result.scene.means[:, 0]
     dark, seam = 0.2 / 0.8, 0.5 / 0.8

@@ -87,20 +87,20 @@ class TransferConfig(SpeedSettings):
         choices=get_args(Projection),
     )
     keep_scene: float = setting(
-        1.0,
+        0.85,
         "Keep Scene",
-        "How much of the scene shows through the laid-out texture: 1 keeps its light and dark, edges and "
-        "parts (the texture reads as the surface's material under the capture's own shading, fainter in its "
-        "dark parts); 0 lays the texture evenly everywhere, so only the outline shows the scene",
+        "How much of the scene's light and dark shows through the laid-out texture: 1 all of it (edges and "
+        "parts read; the texture fainter in dark parts); 0.85 eases the darks so the texture reads there too; "
+        "0 lays the texture evenly, so only the outline shows the scene",
         "texture",
         min=0.0,
         max=1.0,
     )
     scene_colour: float = setting(
-        0.2,
+        0.15,
         "Scene Colour",
         "How much of the capture's own colour shows under the laid-out texture: 0 colours it with the "
-        "texture alone; 0.2 mixes in 20 % of each spot's own colour, so parts that differ only in hue "
+        "texture alone; 0.15 mixes in 15 % of each spot's own colour, so parts that differ only in hue "
         "(pink icing on beige dough, a robot's eyes) stay apart and the capture reads at a glance; 1 keeps "
         "the capture's colours with no texture",
         "texture",
@@ -129,11 +129,11 @@ class TransferConfig(SpeedSettings):
         max=1.0,
     )
     texture_softness: float = setting(
-        0.0,
+        0.01,
         "Texture Softness",
-        "Softens the texture's finest grain before it is laid on, over this share of one repeat: 0.01 smooths "
-        "a photo's speckle and noise away, so the capture's own edges stay readable under the planks, bricks "
-        "and cells; 0 uses the photo as it is",
+        "Softens the texture photo's finest grain, over this share of one repeat, before it is laid on: 0.01 "
+        "smooths its speckle away, so the capture's edges read under the planks, bricks and cells; 0: the photo "
+        "as it is",
         "texture",
         min=0.0,
         max=0.1,

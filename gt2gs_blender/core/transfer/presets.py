@@ -13,6 +13,7 @@ PAPER: dict[str, Any] = dict(
     texture_height=256,  # the authors' style_image_size
     layout=False,  # the paper starts from the scene's own colours
     texture_repeats=0.0,  # and sizes the texture in pixels
+    texture_softness=0.0,  # and matches the texture photo as it is
     lambda_style=2.0,  # paper appendix: lambda_gt = 2
     lambda_tv=0.02,  # paper appendix
     lambda_prior=100.0,  # the authors' code (style_loss.py: + 100 * |angle|); the text gives no value
