@@ -17,6 +17,8 @@ Rules (``T``: texture RGB, ``Y``: the original's luminance per pixel, over the o
   (the engine's ``exposed``: a gain to darken, a power to lighten, so nothing clips);
 - ``blur``: the texture's finest grain softened first (a Gaussian of that many pixels of the held-out view, within
   the surface), so the scene's own fine detail is all the composite has at that scale;
+- ``edge_blur``: the texture's grain softened as ``blur`` does, but across its edges (steps of luminance above
+  ``edge_step``) not at all (a bilateral filter): a photo's speckle smoothed, the mortar and grooves kept;
 - ``log_contrast``: the texture's spread of log luminance set to this first (hue kept; a faint wood raised, a
   stark pattern lowered), so every texture competes with the scene's light and dark alike.
 
@@ -68,6 +70,8 @@ class Rule:
     brightness: float = 0.0
     blur: float = 0.0
     log_contrast: float = 0.0
+    edge_blur: float = 0.0
+    edge_step: float = 0.1
 
 
 RULES = (
@@ -114,6 +118,37 @@ RULES = (
     Rule("Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, blur 1.5 px", 1.0, 0.1, brightness=1.0, blur=1.5),
     Rule("Keep Scene 0.75, Scene Colour 0.1, Scene Brightness 1, blur 1 px", 0.75, 0.1, brightness=1.0, blur=1.0),
     Rule("Keep Scene 0.5, Scene Colour 0.2, Scene Brightness 1, blur 1 px", 0.5, 0.2, brightness=1.0, blur=1.0),
+    Rule(
+        "Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, edge blur 1.5 px", 1.0, 0.2, brightness=1.0, edge_blur=1.5
+    ),
+    Rule(
+        "Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, edge blur 1.5 px", 1.0, 0.1, brightness=1.0, edge_blur=1.5
+    ),
+    Rule("Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, edge blur 3 px", 1.0, 0.1, brightness=1.0, edge_blur=3.0),
+    Rule(
+        "Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, edge blur 3 px step 0.05",
+        1.0,
+        0.1,
+        brightness=1.0,
+        edge_blur=3.0,
+        edge_step=0.05,
+    ),
+    Rule("Keep Scene 0.85, Scene Colour 0.15, Scene Brightness 1", 0.85, 0.15, brightness=1.0),
+    Rule("Keep Scene 0.85, Scene Colour 0.15, Scene Brightness 1, blur 1 px", 0.85, 0.15, brightness=1.0, blur=1.0),
+    Rule(
+        "Keep Scene 0.85, Scene Colour 0.15, Scene Brightness 1, edge blur 1.5 px",
+        0.85,
+        0.15,
+        brightness=1.0,
+        edge_blur=1.5,
+    ),
+    Rule(
+        "Keep Scene 0.75, Scene Colour 0.1, Scene Brightness 1, edge blur 1.5 px",
+        0.75,
+        0.1,
+        brightness=1.0,
+        edge_blur=1.5,
+    ),
 )
 
 
@@ -129,6 +164,8 @@ def compose(
     t, o = ((x - (1 - a) * bg) / a.clamp_min(1e-3) for x in (t, o))  # un-composited from the background
     if rule.blur > 0:
         t = blurred(t, covered, rule.blur)
+    if rule.edge_blur > 0:
+        t = torch.from_numpy(cv2.bilateralFilter(t.numpy(), -1, rule.edge_step, rule.edge_blur))
     inside = torch.from_numpy(covered)
     t, o = t[inside], o[inside].clamp(0.0, 1.0)
     luma = torch.tensor(measure.LUMA)
