@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from gt2gs_blender.core.errors import InputFileError
-from gt2gs_blender.core.transfer.texture import load_texture, softened
+from gt2gs_blender.core.transfer.texture import load_texture
 
 
 def _rgb_pattern(height: int = 80, width: int = 96) -> np.ndarray:
@@ -135,31 +135,3 @@ def test_constant_and_tiny_textures_warn(tmp_path):
         load_texture(_write(tmp_path / "c.png", np.full((80, 80, 3), 77, np.uint8)))
     with pytest.warns(UserWarning, match="tiny"):
         load_texture(_write(tmp_path / "s.png", _rgb_pattern(20, 30)))
-
-
-def _periodic_gaussian_blur(image: np.ndarray, sigma: float) -> np.ndarray:
-    """The oracle: ``image`` convolved circularly with a continuous Gaussian of ``sigma`` px (in Fourier space)."""
-    fy, fx = np.fft.fftfreq(image.shape[0])[:, None], np.fft.fftfreq(image.shape[1])[None, :]
-    gain = np.exp(-2.0 * np.pi**2 * sigma**2 * (fx**2 + fy**2))[..., None]
-    return np.real(np.fft.ifft2(np.fft.fft2(image.astype(np.float64), axes=(0, 1)) * gain, axes=(0, 1)))
-
-
-def test_softness_zero_returns_the_texture_unchanged():
-    texture = np.random.default_rng(0).random((40, 56, 3), dtype=np.float32)
-    assert softened(texture, 0.0) is texture
-
-
-@pytest.mark.parametrize("share", [0.05, 0.2, 1.5])  # 3.2 px, 12.8 px and 96 px, wider than the image
-def test_softened_texture_is_its_periodic_gaussian_blur(share):
-    texture = np.random.default_rng(1).random((64, 48, 3), dtype=np.float32)
-    soft = softened(texture, share)
-    assert soft.dtype == np.float32 and soft.shape == texture.shape
-    np.testing.assert_allclose(soft, _periodic_gaussian_blur(texture, share * 64), atol=1e-4)
-    np.testing.assert_allclose(soft.mean(axis=(0, 1)), texture.mean(axis=(0, 1)), atol=5e-5)
-
-
-def test_softened_texture_still_tiles_without_a_seam():
-    texture = _rgb_pattern(80, 96).astype(np.float32) / 255.0
-    soft = softened(texture, 0.01)  # 0.8 px: the narrow kernel a default run uses
-    tiled = cv2.GaussianBlur(np.tile(texture, (3, 3, 1)), (0, 0), 0.8)
-    np.testing.assert_allclose(soft, tiled[80:160, 96:192], atol=1e-5)

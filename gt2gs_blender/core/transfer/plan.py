@@ -26,12 +26,13 @@ from ..scene.gaussians import GaussianScene
 from .bank import bank_depth_ratio
 from .config import TransferConfig
 from .content import content_and_hidden
+from .grain import softened
 from .gt2 import view_order
 from .layout import LayoutFrame, layout_frame, projection, texture_height_for
 from .region import region_mask, stylise_start, visible_rows
 from .skips import redundant_views
 from .stylise import moves_splats
-from .texture import load_texture, softened
+from .texture import load_texture
 from .views import ViewSet, fit_cameras
 
 RESOLVED = ("up", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")

@@ -1,5 +1,4 @@
-"""Load a texture photograph as RGB float32 in [0, 1], whatever image file OpenCV can decode, and soften its
-grain (Texture Softness) so that it still tiles.
+"""Load a texture photograph as RGB float32 in [0, 1], whatever image file OpenCV can decode.
 
 Choices:
 - Files are read as bytes and decoded with ``cv2.imdecode`` (``cv2.imread`` fails on non-ASCII paths
@@ -17,14 +16,11 @@ Choices:
 - Textures larger than ``MAX_SIDE`` on a side are downscaled to it (area filter, before the float
   conversion) with a warning: the bank uses a few hundred pixels of height per scale, and a 16k
   texture as float32 RGB alone would take 3 GiB. OpenCV refuses images above 2^30 pixels.
-- Softening blurs each axis in turn over the texture wrapped around at its borders (the layout and the bank
-  tile it, so a plain blur would draw a seam at every repeat); one axis at a time keeps the padded copy small.
 """
 
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import sys
 import warnings
@@ -59,29 +55,6 @@ def load_texture(path: str | os.PathLike) -> np.ndarray:
     rgb = _to_rgb01(image, path)
     _warn_if_unusable(rgb, path)
     return rgb
-
-
-def softened(image: np.ndarray, share: float) -> np.ndarray:
-    """``image`` (H, W, 3) blurred by a Gaussian of ``share`` of its height, borders wrapped so it still tiles
-    seamlessly (Texture Softness: a photo's finest grain smoothed away); 0 returns it unchanged."""
-    if share <= 0.0:
-        return image
-    sigma = share * image.shape[0]
-    return _wrapped_blur(_wrapped_blur(image, sigma, 1), sigma, 0)
-
-
-def _wrapped_blur(image: np.ndarray, sigma: float, axis: int) -> np.ndarray:
-    """``image`` blurred along ``axis`` (0: down, 1: across) by a Gaussian of ``sigma`` px, read as periodic."""
-    radius = math.ceil(4.0 * sigma)  # OpenCV's float kernel reaches 4 sigma
-    kernel = cv2.getGaussianKernel(2 * radius + 1, sigma, cv2.CV_32F)
-    widths = [(0, 0)] * image.ndim
-    widths[axis] = (radius, radius)
-    padded = np.pad(image, widths, mode="wrap")
-    along, across = (kernel, np.ones((1, 1), np.float32)) if axis == 1 else (np.ones((1, 1), np.float32), kernel)
-    blurred = cv2.sepFilter2D(padded, cv2.CV_32F, along, across, borderType=cv2.BORDER_REFLECT)
-    inner = [slice(None)] * image.ndim
-    inner[axis] = slice(radius, radius + image.shape[axis])
-    return np.ascontiguousarray(blurred[tuple(inner)])
 
 
 def _decode(data: np.ndarray, path: str | os.PathLike) -> np.ndarray:
