@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
-from gt2gs_blender.core.transfer.grain import softened
+from gt2gs_blender.core.transfer.grain import SPATIAL_MAX_SIGMA, periodic_blur, softened
 
 
 def _photo(height: int = 64, width: int = 48) -> np.ndarray:
@@ -48,3 +48,25 @@ def test_a_blur_wider_than_the_photo_leaves_its_mean_colour_and_every_blur_keeps
     texture = _photo()
     np.testing.assert_allclose(softened(texture, 1.5), np.broadcast_to(texture.mean((0, 1)), texture.shape), atol=1e-4)
     np.testing.assert_allclose(softened(texture, 0.05).mean((0, 1)), texture.mean((0, 1)), atol=1e-5)
+
+
+@pytest.mark.parametrize("sigma", [2.0, SPATIAL_MAX_SIGMA, 2 * SPATIAL_MAX_SIGMA])  # the kernel, its limit, Fourier
+def test_periodic_blur_is_the_tiled_photo_blurred_and_has_no_seam(sigma):
+    """The layout's pyramid blur (in pixels) equals OpenCV's blur of the photo tiled 5 x 5 at its centre, and
+    commutes with a shift; a mirrored blur (OpenCV's default border) does not."""
+    texture = _photo()
+    tiled = cv2.GaussianBlur(np.tile(texture, (5, 5, 1)), (0, 0), sigma)  # 4 sigma fits in two tiles
+    blurred = periodic_blur(texture, sigma)
+    assert blurred.dtype == np.float32 and blurred.shape == texture.shape
+    np.testing.assert_allclose(blurred, tiled[128:192, 96:144], atol=2e-4)
+    rolled = np.roll(texture, (17, 29), axis=(0, 1))
+    np.testing.assert_allclose(periodic_blur(rolled, sigma), np.roll(blurred, (17, 29), axis=(0, 1)), atol=2e-4)
+    mirrored = cv2.GaussianBlur(texture, (0, 0), sigma)
+    assert np.abs(mirrored - blurred).max() > 0.05
+
+
+def test_periodic_blur_of_a_photo_smaller_than_its_kernel():
+    """A kernel wider than the photo wraps around it several times: an 8 px photo at 6 px is nearly its mean."""
+    texture = _photo(8, 8)
+    blurred = periodic_blur(texture, 6.0)
+    np.testing.assert_allclose(blurred, np.broadcast_to(texture.mean((0, 1)), texture.shape), atol=1e-3)

@@ -734,6 +734,25 @@ def test_each_point_reads_the_texture_blurred_to_its_own_footprint():
     assert abs(float(coarse) - 0.5) < 0.05
 
 
+@pytest.mark.parametrize("footprint", [0.02, 0.2, 0.6])  # pyramid levels 0, 4 and 5: no blur, 8 px and 16 px
+def test_the_layout_reads_the_texture_without_a_seam(footprint):
+    """The sampler and the prefilter pyramid read the texture as it tiles: a photo rolled by half its size, read
+    half a repeat further on, gives every point the same colour, at the repeat's edges too (a mirrored blur, and a
+    sampler clamped at the photo's border, did not)."""
+    from gt2gs_blender.core.transfer.layout import LayoutFrame, project_texture
+
+    frame = LayoutFrame(axes=np.eye(3), repeat=1.0)
+    y, x = np.mgrid[0:64, 0:64].astype(np.float32)
+    texture = np.stack([x / 63, y / 63, (x * y) % 7 / 6], axis=-1)  # ramps that jump at the edges
+    points = torch.stack([torch.linspace(-0.1, 1.1, 97), torch.linspace(0.05, 0.95, 97), torch.zeros(97)], -1)
+    normals = torch.tensor([[0.0, 0.0, 1.0]]).expand(97, 3)
+    shifted = points + torch.tensor([0.5, -0.5, 0.0])  # texture x right, y down: the world's +up reads -y
+    rolled = np.roll(texture, (32, 32), axis=(0, 1))
+    here = project_texture(points, normals, texture, frame, 0.0, footprint)
+    there = project_texture(shifted, normals, rolled, frame, 0.0, footprint)
+    torch.testing.assert_close(there, here, atol=2e-4, rtol=0.0)
+
+
 def test_splitting_first_lays_out_the_same_start(shared, tmp_path):
     """Split Before Refining changes when the coarse splats split, not what is laid: with no steps the run
     equals the one that splits at the end, splat for splat, shade included."""

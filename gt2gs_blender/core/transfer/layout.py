@@ -52,6 +52,7 @@ from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
+from .grain import periodic_blur
 from .metrics import LUMA
 from .setting import Projection
 from .shade import kept_scene, layout_shade, shading, spatial_blur, under_scene
@@ -316,7 +317,8 @@ def project_texture(
     """(N, 3) RGB of the frame's projection at world ``points`` with ``normals`` (the box blends its planes
     by them; the view projection ignores them); each point reads the texture blurred by ``PREFILTER`` x its
     ``footprint`` (a world length, per point or one for all) as the projection scales it, the nearest of a
-    pyramid of blurs, so nothing finer than a splat aliases and nothing coarser is lost."""
+    pyramid of blurs (periodic, as the texture tiles), so nothing finer than a splat aliases and nothing coarser
+    is lost."""
     height = texture.shape[0]
     world_per_px = frame.repeat / height
     planes, scale = _planes(points, normals, frame)
@@ -325,7 +327,7 @@ def project_texture(
     colours = torch.zeros(len(points), 3, dtype=scale.dtype, device=scale.device)
     for k in level.unique().tolist():
         rows = (level == k).nonzero().squeeze(1)
-        image = cv2.GaussianBlur(texture, (0, 0), 0.5 * 2.0**k) if k > 0 else texture
+        image = periodic_blur(texture, 0.5 * 2.0**k) if k > 0 else texture
         for h, v, weight in planes:
             sampled = _sample(image, h[rows] / world_per_px, -v[rows] / world_per_px, angle_deg)
             colours[rows] += weight[rows, None] * sampled
@@ -364,8 +366,17 @@ def _sample(texture: np.ndarray, x: torch.Tensor, y: torch.Tensor, angle_deg: fl
     (c, s), _ = screen_rotation(angle_deg).tolist()
     tx, ty = c * x - s * y, s * x + c * y  # the inverse (transpose) of the on-screen rotation [[c, s], [-s, c]]
     height, width = texture.shape[:2]
-    grid = torch.stack([torch.remainder(tx, width) / width * 2 - 1, torch.remainder(ty, height) / height * 2 - 1], -1)
-    image = torch.from_numpy(np.ascontiguousarray(texture)).permute(2, 0, 1)[None].to(x)
+    wrapped = np.pad(
+        texture, ((1, 1), (1, 1), (0, 0)), mode="wrap"
+    )  # so a texel at an edge blends with the next repeat
+    grid = torch.stack(
+        [
+            (torch.remainder(tx, width) + 1) / (width + 2) * 2 - 1,
+            (torch.remainder(ty, height) + 1) / (height + 2) * 2 - 1,
+        ],
+        -1,
+    )
+    image = torch.from_numpy(wrapped).permute(2, 0, 1)[None].to(x)
     sampled = F.grid_sample(image, grid[None, None], mode="bilinear", padding_mode="border", align_corners=False)
     return sampled[0, :, 0].T
 
