@@ -366,9 +366,8 @@ def _sample(texture: np.ndarray, x: torch.Tensor, y: torch.Tensor, angle_deg: fl
     (c, s), _ = screen_rotation(angle_deg).tolist()
     tx, ty = c * x - s * y, s * x + c * y  # the inverse (transpose) of the on-screen rotation [[c, s], [-s, c]]
     height, width = texture.shape[:2]
-    wrapped = np.pad(
-        texture, ((1, 1), (1, 1), (0, 0)), mode="wrap"
-    )  # so a texel at an edge blends with the next repeat
+    # one texel of the next repeat on each side, so a point by an edge blends into it (grid_sample cannot wrap)
+    wrapped = np.pad(texture, ((1, 1), (1, 1), (0, 0)), mode="wrap")
     grid = torch.stack(
         [
             (torch.remainder(tx, width) + 1) / (width + 2) * 2 - 1,
