@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.common import parse_overrides
-from gt2gs_blender.core.scene.ply import read_ply
+from gt2gs_blender.core.scene.files import read_scene
 from gt2gs_blender.core.transfer.metrics import peak_memory_mib
 from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.presets import preset
@@ -39,7 +39,17 @@ SHARED = ROOT.parent / "shared"
 OUT = ROOT / "bench" / "out"
 DEFAULT_SCENE = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 DEFAULT_TEXTURE = SHARED / "data" / "textures" / "herringbone_wood.jpg"
-METRICS = ("texture_match", "texture_match_start", "ssim", "st_rmse", "lt_rmse", "st_lpips", "lt_lpips")
+METRICS = (
+    "texture_match",
+    "texture_match_start",
+    "object_ssim",
+    "object_ssim_blurred",
+    "ssim",
+    "st_rmse",
+    "lt_rmse",
+    "st_lpips",
+    "lt_lpips",
+)
 PROFILE_PARTS: dict[str, tuple[tuple[str, str], ...]] = {
     "stylise phases": (("stylise.py", "stylise_step"),),
     "  render fwd (stylise)": (),
@@ -91,7 +101,7 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | No
     config = preset(args.preset, weights_path=str(args.weights), **overrides)
     if cache_dir is not None:
         config = config.with_overrides(cache_dir=cache_dir)
-    scene = read_ply(args.scene)
+    scene = read_scene(args.scene)
     load_before = os.getloadavg()
     profiler = cProfile.Profile() if args.profile else None
     start = time.perf_counter()
