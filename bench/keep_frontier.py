@@ -1,11 +1,12 @@
 """The ceiling of each way to keep the scene under the texture (issue 37), free of splats and optimisation.
 
-Per held-out view of a bench scene, the layout as an exact surface shows it (``layout_surface``: the texture
-per pixel, unshaded) is composed with the original render by a rule, and the composite is judged as a result
-is in ``bench/recognise.py``: the structure ranks (Gram and Gabor, among the 10 textures) and the content
-(luminance SSIM to the original over the object's pixels). The run moves a result a rank or two from its
-surface (its texture loss sharpens what the layout lays: at Keep Scene 1 the fern's surface finds 2 textures, the
-run 3), so a rule far from both targets here stays far from them through the splats.
+Per held-out view of a bench scene, the layout as an exact surface shows it (``layout_surface``: the run's
+softened texture per pixel, unshaded, over every pixel the measure counts) is composed with the original render by
+a rule, and the composite is judged as a result is in ``bench/recognise.py``, over the same pixels: the structure
+ranks (Gram and Gabor, among the 10 textures) and the content (luminance SSIM to the original over the object's
+pixels). The run moves a result from its surface: its texture loss draws the lines sharper than the softened photo
+laid flat (at today's default the fern's surface finds 1 texture with a rank sum of 72, the run 2 with 48) and
+spends content for it (0.662 against 0.553).
 
 Rules (``T``: texture RGB, ``Y``: the original's luminance per pixel, over the object's pixels):
 - *Keep Scene* k: ``T * (Y / bright end)^k``, the engine's ``shading`` (bright end: the 95th percentile of ``Y``);
@@ -118,6 +119,12 @@ RULES = (
     Rule("Keep Scene 1, Scene Colour 0.1, Scene Brightness 1, blur 1.5 px", 1.0, 0.1, brightness=1.0, blur=1.5),
     Rule("Keep Scene 0.75, Scene Colour 0.1, Scene Brightness 1, blur 1 px", 0.75, 0.1, brightness=1.0, blur=1.0),
     Rule("Keep Scene 0.5, Scene Colour 0.2, Scene Brightness 1, blur 1 px", 0.5, 0.2, brightness=1.0, blur=1.0),
+    Rule("Keep Scene 0.5, Scene Colour 0.2, Scene Brightness 1", 0.5, 0.2, brightness=1.0),
+    Rule("Keep Scene 0.5, Scene Colour 0.15, Scene Brightness 1", 0.5, 0.15, brightness=1.0),
+    Rule("Keep Scene 0.5, Scene Colour 0.3, Scene Brightness 1", 0.5, 0.3, brightness=1.0),
+    Rule("Keep Scene 0.6, Scene Colour 0.2, Scene Brightness 1", 0.6, 0.2, brightness=1.0),
+    Rule("Keep Scene 0.6, Scene Colour 0.2, Scene Brightness 1, blur 1 px", 0.6, 0.2, brightness=1.0, blur=1.0),
+    Rule("Keep Scene 0.5, Scene Colour 0.2, Scene Brightness 1, blur 1.5 px", 0.5, 0.2, brightness=1.0, blur=1.5),
     Rule(
         "Keep Scene 1, Scene Colour 0.2, Scene Brightness 1, edge blur 1.5 px", 1.0, 0.2, brightness=1.0, edge_blur=1.5
     ),

@@ -14,7 +14,8 @@ onto the object (``orientation_preview`` at the preset's resolution, texture hei
 must rank near the top, and the original untransferred scene must not (the null case). With ``layout`` on,
 a ``layout-start`` row too: the scene with the texture laid out exactly as the run starts from it (before any
 optimisation), rendered from the held-out views (with several presets, ``<preset>-layout-start``), and a
-``layout-surface`` row: that layout on an exact surface, no splats (``layout_surface``), the most splats can show.
+``layout-surface`` row: that layout on an exact surface, no splats (``layout_surface``): the layout free of the
+splats' blur (a run's texture loss can still draw its lines sharper).
 
 From the preview: every result's held-out renders are compared image to image with the preview of the same
 views (``recognise_measure.pair_distance``: window by window, both measures, no scale or rotation search),
@@ -26,7 +27,8 @@ at the run's texture height (a ``projected-<height>`` row); ``preview_reference`
 Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its
 held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
 the texture (the structure measures reward the texture alone; this is the other side of the trade). The
-original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade).
+original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade) and
+cover every pixel the measure counts.
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again

@@ -11,7 +11,7 @@ CC-BY-4.0) are seen as the donut is, about their own up axis.
 ``run_start``/``layout_start``: what a run on a scene starts from, from the engine's own pieces (the pipeline's
 prepare stage): the layout's frame from the run's views, and the scene with the texture laid out before any
 optimisation step, to render from the held-out views. ``layout_surface``: the same layout on an exact surface
-(no splats), the ceiling of what splats can show of it.
+(no splats): the layout free of the splats' blur.
 """
 
 from __future__ import annotations
@@ -29,6 +29,7 @@ if str(ROOT) not in sys.path:
 
 import numpy as np
 import torch
+from recognise_measure import MASK_ALPHA
 
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
@@ -36,9 +37,8 @@ from gt2gs_blender.core.transfer.layout import (
     layout_images,
 )
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
-from gt2gs_blender.core.transfer.plan import RunPlan, plan_run
-from gt2gs_blender.core.transfer.texture import load_texture
-from gt2gs_blender.core.transfer.views import render_views
+from gt2gs_blender.core.transfer.plan import RunPlan, plan_run, run_texture
+from gt2gs_blender.core.transfer.views import ViewSet, render_views
 
 SHARED = ROOT.parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
@@ -128,23 +128,42 @@ def layout_start(run: RunPlan, texture: Path) -> GaussianScene:
     """The layout a run with ``layout`` on lays, without the optimisation's changes: the texture on the
     splats the run restyles, split to its detail (hidden ones keep their colours, as the result keeps them)."""
     assert run.content is not None and run.frame is not None and run.config.layout
-    return laid_out_start(replace(run, texture=load_texture(texture)))
+    return laid_out_start(replace(run, texture=run_texture(texture, run.config)))
 
 
 @torch.no_grad()
 def layout_surface(run: RunPlan, bench: BenchScene, texture: Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """(RGB uint8 over the background, alpha) per held-out view: the layout as an exact surface shows it there
-    (``layout_images`` on the original scene's depth, no splats): the most any splat result of this layout can
-    show, so a rank the surface misses is the layout's (or the measure's), not the splats' or the optimisation's."""
+    (``layout_images`` on the original scene's depth, no splats, the run's softened texture): the layout free of
+    the splats' blur, over every pixel the measure counts (``measured``). A run's texture loss can draw the lines
+    sharper than this flat layout (at today's default the fern's run finds a texture more than its surface)."""
     assert run.frame is not None and run.config.layout
     background = torch.tensor(bench.background, dtype=torch.float32)
-    views = render_views(bench.scene.detach(), bench.held_out, background, run.config.backend)
+    views = measured(render_views(bench.scene.detach(), bench.held_out, background, run.config.backend))
     out = []
-    for image in layout_images(views, load_texture(texture), run.frame, run.config.angle):
+    for image in layout_images(views, run_texture(texture, run.config), run.frame, run.config.angle):
         rgb, alpha = image[..., :3].cpu().numpy(), image[..., 3].cpu().numpy()
         over = rgb * alpha[..., None] + (1.0 - alpha[..., None]) * np.asarray(bench.background, np.float32)
         out.append(((over.clip(0.0, 1.0) * 255 + 0.5).astype(np.uint8), alpha))
     return out
+
+
+def measured(views: ViewSet) -> ViewSet:
+    """``views`` opaque wherever the measure counts a pixel (alpha above ``MASK_ALPHA``) and empty elsewhere, at
+    the same surface depth: the layout's own surfaces stop at alpha 0.9, and a ceiling measured over those alone
+    left out the semi-transparent pixels (a tenth of the coarse fern's) that a result is judged on."""
+    covered = [a > MASK_ALPHA for a in views.alphas]
+    return replace(
+        views,
+        alphas=[c.to(a) for c, a in zip(covered, views.alphas)],
+        depths=[
+            torch.where(c, d / a.clamp_min(MASK_ALPHA), 0.0) for c, d, a in zip(covered, views.depths, views.alphas)
+        ],
+        premultiplied=[
+            torch.where(c[..., None], p / a.clamp_min(MASK_ALPHA)[..., None], 0.0)
+            for c, p, a in zip(covered, views.premultiplied, views.alphas)
+        ],
+    )
 
 
 if __name__ == "__main__":

@@ -94,8 +94,7 @@ def plan_run(
     views only when the layout or ``texture_repeats`` needs them (the sketch preview takes a fraction of a
     second), and leaves the depth ratio as asked then."""
     device = resolve_device(config.device)
-    image = load_texture(texture) if not isinstance(texture, np.ndarray) else _texture_array(texture)
-    image = softened(image, config.texture_softness)
+    image = run_texture(texture, config)
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
     framed = original if selected is None else original.subset(selected)
@@ -133,6 +132,13 @@ def plan_run(
         start=start,
         frame=frame,
     )
+
+
+def run_texture(texture: np.ndarray | str | os.PathLike, config: TransferConfig) -> np.ndarray:
+    """The texture as a run with ``config`` reads it (a path loaded, an array checked), softened by its
+    ``texture_softness``: what the layout, the bank, the texture loss and the preview all see."""
+    image = load_texture(texture) if not isinstance(texture, np.ndarray) else _texture_array(texture)
+    return softened(image, config.texture_softness)
 
 
 def _texture_array(texture: np.ndarray) -> np.ndarray:
