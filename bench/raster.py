@@ -133,18 +133,23 @@ def measure(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
         print(f"  {backend}/{device} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
-        return {
-            "backend": backend,
-            "device": device,
-            "n": n,
-            "width": res,
-            "height": res,
-            "fwd_ms": None,
-            "fwd_bwd_ms": None,
-            "peak_mib": None,
-            "max_abs_err": None,
-        }
+        return unmeasured(backend, device, n, res)
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def unmeasured(backend: str, device: str, n: int, res: int) -> dict:
+    """The record of a configuration that did not run (failed, or skipped as too slow): its key, no numbers."""
+    return {
+        "backend": backend,
+        "device": device,
+        "n": n,
+        "width": res,
+        "height": res,
+        "fwd_ms": None,
+        "fwd_bwd_ms": None,
+        "peak_mib": None,
+        "max_abs_err": None,
+    }
 
 
 def backend_devices() -> list[tuple[str, str]]:
@@ -237,17 +242,7 @@ def main(argv: list[str] | None = None) -> int:
         for backend, device in runs:
             key = f"{backend}/{device}"
             if too_slow.get(key, float("inf")) <= n * res * res:
-                rec = {
-                    "backend": backend,
-                    "device": device,
-                    "n": n,
-                    "width": res,
-                    "height": res,
-                    "fwd_ms": None,
-                    "fwd_bwd_ms": None,
-                    "peak_mib": None,
-                    "max_abs_err": None,
-                }
+                rec = unmeasured(backend, device, n, res)
             else:
                 rec = measure(backend, device, n, res, args.repeats)
                 if rec["fwd_bwd_ms"] is None or rec["fwd_bwd_ms"] > 1000 * SLOW_BACKEND_LIMIT_S:
