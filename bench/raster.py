@@ -114,17 +114,9 @@ def run_one(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
         )
         diff = (out.colors[0].detach().double().cpu().numpy() - ref.color)[~ref.ambiguous]
         err = float(abs(diff).max())
-    return {
-        "backend": backend,
-        "device": device,
-        "n": n,
-        "width": res,
-        "height": res,
-        "fwd_ms": 1000 * statistics.median(fwd),
-        "fwd_bwd_ms": 1000 * statistics.median(total),
-        "peak_mib": max(0.0, peak),
-        "max_abs_err": err,
-    }
+    return record(
+        backend, device, n, res, 1000 * statistics.median(fwd), 1000 * statistics.median(total), max(0.0, peak), err
+    )
 
 
 def measure(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
@@ -133,22 +125,31 @@ def measure(backend: str, device: str, n: int, res: int, repeats: int) -> dict:
     proc = subprocess.run(cmd, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
         print(f"  {backend}/{device} n={n} {res}px failed: {proc.stderr.strip().splitlines()[-1:]}", file=sys.stderr)
-        return unmeasured(backend, device, n, res)
+        return record(backend, device, n, res)
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
-def unmeasured(backend: str, device: str, n: int, res: int) -> dict:
-    """The record of a configuration that did not run (failed, or skipped as too slow): its key, no numbers."""
+def record(
+    backend: str,
+    device: str,
+    n: int,
+    res: int,
+    fwd_ms: float | None = None,
+    fwd_bwd_ms: float | None = None,
+    peak_mib: float | None = None,
+    max_abs_err: float | None = None,
+) -> dict:
+    """One configuration's row of the JSON; without numbers, one that did not run (failed, or skipped as too slow)."""
     return {
         "backend": backend,
         "device": device,
         "n": n,
         "width": res,
         "height": res,
-        "fwd_ms": None,
-        "fwd_bwd_ms": None,
-        "peak_mib": None,
-        "max_abs_err": None,
+        "fwd_ms": fwd_ms,
+        "fwd_bwd_ms": fwd_bwd_ms,
+        "peak_mib": peak_mib,
+        "max_abs_err": max_abs_err,
     }
 
 
@@ -242,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
         for backend, device in runs:
             key = f"{backend}/{device}"
             if too_slow.get(key, float("inf")) <= n * res * res:
-                rec = unmeasured(backend, device, n, res)
+                rec = record(backend, device, n, res)
             else:
                 rec = measure(backend, device, n, res, args.repeats)
                 if rec["fwd_bwd_ms"] is None or rec["fwd_bwd_ms"] > 1000 * SLOW_BACKEND_LIMIT_S:
