@@ -32,6 +32,7 @@ import torch
 from recognise_measure import MASK_ALPHA
 
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
+from gt2gs_blender.core.cameras.warp import expected_depth
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
 from gt2gs_blender.core.transfer.layout import (
     layout_images,
@@ -156,9 +157,7 @@ def measured(views: ViewSet) -> ViewSet:
     return replace(
         views,
         alphas=[c.to(a) for c, a in zip(covered, views.alphas)],
-        depths=[
-            torch.where(c, d / a.clamp_min(MASK_ALPHA), 0.0) for c, d, a in zip(covered, views.depths, views.alphas)
-        ],
+        depths=[expected_depth(d, a, MASK_ALPHA) * c for c, d, a in zip(covered, views.depths, views.alphas)],
         premultiplied=[
             torch.where(c[..., None], p / a.clamp_min(MASK_ALPHA)[..., None], 0.0)
             for c, p, a in zip(covered, views.premultiplied, views.alphas)
