@@ -9,20 +9,21 @@ ten shared textures are ranked by a structure-only distance to those renders und
 (bench/recognise_measure.py: VGG-16 relu1_2/relu2_2 Gram matrices and a Gabor bank; grey, on the object's
 pixels, best over texture scales and rotations). Rank 1 = the transferred texture is the closest of the ten.
 
-Calibration, in every run (and alone with ``--only-measure``, seconds per scene): the texture simply projected
-onto the object (``orientation_preview`` at the preset's resolution, texture heights ``--projected-heights``)
-must rank near the top, and the original untransferred scene must not (the null case). With ``layout`` on,
-a ``layout-start`` row too: the scene with the texture laid out exactly as the run starts from it (before any
-optimisation), rendered from the held-out views (with several presets, ``<preset>-layout-start``), and a
-``layout-surface`` row: that layout on an exact surface, no splats (``layout_surface``): the layout free of the
-splats' blur (a run's texture loss can still draw its lines sharper).
+Calibration, in every run (and alone with ``--only-measure``, seconds per scene): the texture alone, nothing of
+the scene kept, projected onto the object in screen space (``projected``: texture heights ``--projected-heights``
+at the preset's resolution) must rank near the top, and the original untransferred scene must not (the null
+case). With ``layout`` on, a ``layout-start`` row too: the scene with the texture laid out exactly as the run
+starts from it (before any optimisation), rendered from the held-out views (with several presets,
+``<preset>-layout-start``), and a ``layout-surface`` row: that layout on an exact surface, no splats
+(``layout_surface``): the layout free of the splats' blur (a run's texture loss can still draw its lines sharper).
 
 From the preview: every result's held-out renders are compared image to image with the preview of the same
 views (``recognise_measure.pair_distance``: window by window, both measures, no scale or rotation search),
 ``preview_gram`` / ``preview_gabor`` in the rows; ``original_preview_*`` is the same distance for the
 untransferred scene, for scale (a result nearer its preview than the original is keeps what the preview
-promised). The preview is the layout start when ``layout`` is on, else the screen-space orientation preview
-at the run's texture height (a ``projected-<height>`` row); ``preview_reference`` names it.
+promised). The preview is the layout start when ``layout`` is on, else the screen-space sketch the run's preview
+shows (``orientation_preview.sketch``: its texture size, depth groups and kept scene; a ``sketch`` row);
+``preview_reference`` names it.
 
 Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its
 held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
@@ -47,6 +48,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -64,8 +66,8 @@ from recognise_scenes import SCENES, BenchScene, layout_start, layout_surface, l
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.metrics import masked_ssim
-from gt2gs_blender.core.transfer.orientation_preview import orientation_preview
-from gt2gs_blender.core.transfer.plan import RunPlan
+from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, sketch
+from gt2gs_blender.core.transfer.plan import RunPlan, run_texture
 
 SHARED = ROOT.parent / "shared"
 TEXTURES = SHARED / "data" / "textures"
@@ -113,6 +115,40 @@ def score(views: list[measure.ViewStats], stats: list[measure.TextureStats]) -> 
     """Per measure: each texture's distance, mean over the views."""
     per_view = [measure.distances(v, stats) for v in views]
     return {m: {t.name: float(np.mean([v[m][t.name] for v in per_view])) for t in stats} for m in MEASURES}
+
+
+def projected(
+    bench: BenchScene, texture: Path, height: int, config: TransferConfig, alphas: list[np.ndarray]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The calibration's views: the texture alone (``keep`` 0: none of the scene's light or colour, so the measure
+    must find it) projected in screen space over the object as each held-out view sees it, ``height`` px tall at
+    ``config``'s resolution, with the original's ``alphas``."""
+    return [
+        (
+            orientation_preview(
+                bench.scene,
+                texture,
+                cam,
+                config.angle,
+                size=max(cam.width, cam.height),
+                resolution=config.resolution,
+                texture_height=height,
+                background=bench.background,
+                keep=0.0,
+            ),
+            alpha,
+        )
+        for cam, alpha in zip(bench.held_out, alphas, strict=True)
+    ]
+
+
+def sketched(
+    run: RunPlan, bench: BenchScene, texture: Path, alphas: list[np.ndarray]
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A ``layout``-off run's preview of each held-out view (the engine's ``sketch`` of its plan with ``texture``),
+    with the original's ``alphas``."""
+    plan = replace(run, texture=run_texture(texture, run.config))
+    return [(sketch(plan, cam, max(cam.width, cam.height)), a) for cam, a in zip(bench.held_out, alphas, strict=True)]
 
 
 def content_ssim(views: list[tuple[np.ndarray, np.ndarray]], original: list[tuple[np.ndarray, np.ndarray]]) -> float:
@@ -219,15 +255,12 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     first_texture = texture_path(args.textures[0])  # the plans differ only in the texture, swapped in per texture
     starts = {p: run_start(bench, run_config(p, args, bench, args.seeds[0]), first_texture) for p in args.presets}
     print(f"[{name}] run starts prepared in {time.perf_counter() - start:.1f} s", flush=True)
-    # the preview each preset's results are compared with: its layout start, else the projection at its height
+    # the preview each preset's results are compared with: its layout start, else its screen-space sketch
     references = {
-        p: (f"{p}-layout-start" if len(args.presets) > 1 else "layout-start")
-        if r.config.layout
-        else f"projected-{r.config.texture_height}"
+        p: (f"{p}-" if len(args.presets) > 1 else "") + ("layout-start" if r.config.layout else "sketch")
         for p, r in starts.items()
     }
-    sketched = [r.config.texture_height for r in starts.values() if not r.config.layout]
-    heights = list(dict.fromkeys([*args.projected_heights, *sketched]))
+    alphas = [alpha for _, alpha in original_views]
     folder = OUT / args.tag / name  # the results, whatever size measures them
     pictures = OUT / output_name(args) / name
     for texture in args.textures:
@@ -236,23 +269,8 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
         previews: dict[str, list[measure.ViewStats]] = {}
         r = row(name, texture, "original", original)
         r["content_ssim"] = 1.0  # the original is the scene
-        for height in heights:
-            views = [
-                (
-                    orientation_preview(
-                        bench.scene,
-                        texture_path(texture),
-                        cam,
-                        base_config.angle,
-                        size=max(cam.width, cam.height),
-                        resolution=base_config.resolution,
-                        texture_height=height,
-                        background=bench.background,
-                    ),
-                    alpha,
-                )
-                for cam, (_, alpha) in zip(bench.held_out, original_views, strict=True)
-            ]
+        for height in args.projected_heights:
+            views = projected(bench, texture_path(texture), height, base_config, alphas)
             variant = f"projected-{height}"
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats))
@@ -260,10 +278,16 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
         for preset_name, run in starts.items():
-            if not run.config.layout:
-                continue
             t0 = time.perf_counter()
             variant = references[preset_name]
+            if not run.config.layout:
+                views = sketched(run, bench, texture_path(texture), alphas)
+                previews[variant] = view_stats(views)
+                p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
+                p["content_ssim"] = content_ssim(views, original_views)
+                rows.append(p)
+                sheet[texture].append(tile(views[0][0], ranks_label(p, "sketch")))
+                continue
             views = held_out_renders(layout_start(run, texture_path(texture)), bench)
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
@@ -392,7 +416,7 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
 
 
 def is_transfer(variant: str) -> bool:
-    calibration = variant.startswith("projected") or variant.endswith(("layout-start", "layout-surface"))
+    calibration = variant.startswith("projected") or variant.endswith(("sketch", "layout-start", "layout-surface"))
     return variant != "original" and not calibration
 
 

@@ -140,10 +140,17 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
         cam = first.scaled(size / max(first.width, first.height))
         out = render(laid, [cam], background=plan.background, backend=config.backend)
         return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
-    image = orientation_preview(
+    return Preview(sketch(plan, first, size), len(plan.original))
+
+
+def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:
+    """(H, W, 3) uint8: the screen-space sketch of a run of ``plan`` with ``layout`` off, seen from ``camera`` at
+    longest side ``size``: the run's texture, size, depth groups and kept scene (``orientation_preview``)."""
+    config = plan.config
+    return orientation_preview(
         plan.original,
         plan.texture,
-        first,
+        camera,
         config.angle,
         size=size,
         resolution=config.resolution,
@@ -155,7 +162,6 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
         keep=config.keep_scene,
         colour=config.scene_colour,
     )
-    return Preview(image, len(plan.original))
 
 
 @torch.no_grad()
