@@ -360,6 +360,25 @@ def test_transfer_to_a_format_it_cannot_write_is_refused_before_any_work(capsys,
     assert "read only" in refused(capsys, world, transfer_argv("out.sog"), "out.sog")
 
 
+@pytest.mark.parametrize(
+    ("argv", "named", "words"),
+    [
+        (transfer_argv("out.txt"), "out.txt", "not a splat file name"),
+        (transfer_argv("out"), "out", ".ply, .compressed.ply, .spz, .splat"),
+        (["convert", "scene.ply", "out.webp"], "out.webp", "not a splat file name"),
+        (transfer_argv("out.ply", "scene.ply", "texture.png", "--strip", "strip.jpg"), "strip.jpg", ".png"),
+        (transfer_argv("out.ply", "scene.ply", "texture.png", "--report", "report.png"), "report.png", ".json"),
+    ],
+)
+def test_an_output_whose_name_hides_what_it_holds_is_refused_before_any_work(capsys, world, argv, named, words):
+    assert words in refused(capsys, world, argv, named)
+
+
+def test_convert_with_a_format_given_writes_any_name(capsys, world):
+    assert cli.main(["convert", "scene.ply", "scene.bin", "--format", "spz"]) == 0
+    assert Path("scene.bin").read_bytes()[:2] == b"\x1f\x8b"  # SPZ: a gzip stream
+
+
 def test_transfer_whose_last_output_fails_leaves_none(capsys, world, monkeypatch):
     def no_strip(*_: object) -> None:
         raise OSError(28, "No space left on device", "strip.png")

@@ -32,6 +32,7 @@ from .conftest import SHARED
 REPO = Path(__file__).resolve().parents[1]
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 BRICK = SHARED / "data" / "textures" / "brick_wall.jpg"
+GUITAR = SHARED / "data" / "scenes" / "captures" / "guitar.compressed.ply"
 SMALL = "preset = 'preview'\n[settings]\nn_views = 4\n"
 """Every job's settings: the preview preset at 4 views (the smallest run that still restyles the scene)."""
 
@@ -101,6 +102,18 @@ def test_a_2x2_batch_equals_the_jobs_run_one_by_one(cluster, inputs, tmp_path, c
     assert sheet.shape[0] > 256 and sheet.shape[1] == 4 * 256
     summary = (tmp_path / "out" / "summary.csv").read_text().splitlines()
     assert len(summary) == 5 and summary[0].startswith("job,status,attempts")
+
+
+def test_what_a_jobs_format_drops_is_the_batchs_own_warning(cluster, inputs, tmp_path):
+    """A warning raised on a worker (SPZ clips the guitar's finest splats' log scales) comes back with the job's
+    outcome and is raised by the batch, naming the job, instead of printed raw by the worker process."""
+    manifest = tmp_path / "jobs.csv"
+    manifest.write_text(f"scene,texture,preset,n_views,output\n{GUITAR},{inputs['stripes']},preview,4,g.spz\n")
+    with pytest.warns(UserWarning, match=r"^g: .*g\.spz: spz clips") as raised:
+        (row,) = batch(cluster, manifest, tmp_path / "out")
+    assert row.status == "done" and (tmp_path / "out" / "g" / "g.spz").is_file()
+    result = tmp_path / "out" / "g" / "g.spz"
+    assert all(str(w.message).startswith(f"g: {result}: spz clips") for w in raised)  # each note once, the job's
 
 
 def test_a_job_whose_worker_is_killed_runs_again(cluster, inputs, tmp_path):

@@ -261,6 +261,39 @@ def test_usage_errors_exit_2(capsys):
     capsys.readouterr()
 
 
+@pytest.mark.parametrize(
+    ("argv", "needles"),
+    [
+        (["transfer", "a.ply", "t.png", "-o", "o.ply", "--views", "0"], ["transfer:", "--views", "at least 1, got 0"]),
+        (["transfer", "a.ply", "t.png", "-o", "o.ply", "--steps", "-1"], ["--steps", "at least 0, got -1"]),
+        (["transfer", "a.ply", "t.png", "-o", "o.ply", "--keep-scene", "nan"], ["--keep-scene", "finite"]),
+        (["transfer", "a.ply", "t.png", "-o", "o.ply", "--preset", "previe"], ["--preset", "'preview'"]),
+        (["transfer", "a.ply", "t.png", "-o", "o.ply", "--up", "-y"], ["--up", "--up=-y"]),
+        (["demo", "--views", "0"], ["demo:", "--views", "at least 1"]),
+        (["bogus"], ["'bogus'", "'transfer'"]),
+    ],
+)
+def test_a_usage_error_is_one_line_naming_the_flag_the_user_typed(capsys, argv, needles):
+    code, out, err = run(capsys, *argv)
+    assert code == 2 and out == ""
+    assert_one_line_error(err, *needles)
+    assert "n_views" not in err and "stylise_steps" not in err and "usage:" not in err
+
+
+def test_the_reader_closing_the_pipe_is_no_error(small_ply):
+    """``info | head``: the output pipe closed before the command writes (its read end shut at once)."""
+    process = subprocess.Popen(
+        [sys.executable, "-m", "gt2gs_blender", "info", str(small_ply)],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    process.stdout.close()
+    err = process.stderr.read().decode()
+    assert process.wait(timeout=120) == cli.EXIT_PIPE
+    assert err == ""
+
+
 # -- demo -------------------------------------------------------------------------------------------
 
 

@@ -18,6 +18,7 @@ import queue
 import signal
 import time
 import uuid
+import warnings
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -305,6 +306,8 @@ def _row(future: Any, job: Job, out: Path, attempts: int) -> Row:
     """A finished future's row: the job's outcome, or why it failed after its retries."""
     if future.status == "finished":
         outcome: Outcome = future.result()
+        for note in outcome.notes:  # shown here as the command's own warnings, not the worker's raw ones
+            warnings.warn(f"{job.name}: {note}", stacklevel=1)
         report = read_report(folder(out, job).report) if outcome.status == "done" else None
         return Row(job, outcome.status, attempts, outcome.seconds, outcome.error, report or {})
     if future.status == "cancelled":

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +33,8 @@ class Outcome:
     status: str
     seconds: float
     error: str = ""
+    notes: tuple[str, ...] = ()
+    """The warnings the job raised on its worker (what a format dropped), for the batch to show as its own."""
 
 
 def run_job(
@@ -48,13 +51,21 @@ def run_job(
     hash, kept in the report for ``--resume``, with the ``batch`` facts (the worker) beside it. Raises
     :class:`Cancelled` when ``cancel()`` says so, and errors worth a retry."""
     start = time.monotonic()
-    try:
-        _run(job, out, key, threads, device, cancel, batch or {})
-    except Cancelled:
-        raise
-    except (GT2GSError, ValueError) as exc:
-        return Outcome(job.name, "failed", time.monotonic() - start, one_line(exc))
-    return Outcome(job.name, "done", time.monotonic() - start)
+    with warnings.catch_warnings(record=True) as raised:
+        warnings.simplefilter("always")
+        try:
+            _run(job, out, key, threads, device, cancel, batch or {})
+        except Cancelled:
+            raise
+        except (GT2GSError, ValueError) as exc:
+            return Outcome(job.name, "failed", time.monotonic() - start, one_line(exc), _notes(raised))
+    return Outcome(job.name, "done", time.monotonic() - start, notes=_notes(raised))
+
+
+def _notes(raised: list[warnings.WarningMessage]) -> tuple[str, ...]:
+    """The user warnings among ``raised``, one line each, once each (library deprecations say nothing to a user)."""
+    lines = (" ".join(str(w.message).split()) for w in raised if issubclass(w.category, UserWarning))
+    return tuple(dict.fromkeys(lines))
 
 
 def _run(

@@ -30,8 +30,8 @@ def add_convert_command(commands: Any, debug: argparse.ArgumentParser) -> None:
 
 def cmd_convert(args: argparse.Namespace) -> None:
     """Read IN, write OUT, and say what the output format dropped."""
+    check_outputs([("the output", args.output)], scene_input(args.scene))
     fmt = output_format(args.output, args.format)
-    check_outputs([("OUT", args.output)], scene_input(args.scene))
     scene = read_splats(args.scene, drop_invalid=args.drop_invalid)
     for note in write_splats(args.output, scene, fmt):
         warnings.warn(f"{args.output}: {note}", stacklevel=1)

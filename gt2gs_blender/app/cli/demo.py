@@ -16,11 +16,12 @@ from ...core.atomic import all_or_nothing, check_outputs, require_input
 from ...core.features.weights import ENV_VAR
 from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
+from ...core.transfer.config import SETTINGS
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import positive_int, render_options, scene_input, scene_options
-from .options import add_setting_arguments, config_from_args
+from .args import render_options, scene_input, scene_options
+from .options import add_setting_arguments, config_from_args, in_range
 from .transfer import GIVEN
 
 SHARED = Path(__file__).resolve().parents[3].parent / "shared"
@@ -48,7 +49,7 @@ def add_demo_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--views",
         dest="n_views",
-        type=positive_int,
+        type=in_range(SETTINGS["n_views"], int),
         metavar="N",
         help="number of automatic views (default: the preset's)",
     )

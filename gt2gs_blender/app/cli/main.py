@@ -11,10 +11,12 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
+import os
 import sys
 import traceback
 import warnings
 from collections.abc import Iterator, Sequence
+from typing import NoReturn
 
 from ...core.errors import GT2GSError, out_of_memory_message
 from . import transfer as transfer_cmd
@@ -27,9 +29,10 @@ from .parts import add_parts_command
 from .render import add_render_command
 
 PROG = "gt2gs"
+PARSER_PROG = "python -m gt2gs_blender"
 
 
-EXIT_INTERNAL, EXIT_USER = 1, 2
+EXIT_INTERNAL, EXIT_USER, EXIT_PIPE = 1, 2, 141
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -47,6 +50,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.run(args)
         except KeyboardInterrupt:
             return _fail(args.debug, "interrupted", 130)
+        except BrokenPipeError:  # the reader stopped reading (``| head``): nothing went wrong here
+            return _reader_gone()
         except (GT2GSError, OSError, ValueError) as exc:
             return _fail(args.debug, _user_message(exc), EXIT_USER)
         except Exception as exc:  # out of memory (the user can ask for less), else a bug: one line unless --debug
@@ -58,12 +63,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with a usage error in one line, as every other error (its subcommands' parsers are of this class)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``gt2gs: error: <command>: <message>`` (with a hint for a value that starts with '-') and exit 2."""
+        if message.startswith("argument ") and message.endswith("expected one argument"):
+            message += " (write a value that starts with '-' with '=', e.g. --up=-y)"
+        command = self.prog.removeprefix(PARSER_PROG).strip()
+        print(f"{PROG}: error: {command + ': ' if command else ''}{message} (see --help)", file=sys.stderr)
+        sys.exit(EXIT_USER)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argparse tree: global --debug, then the info / render / demo subcommands."""
     debug = argparse.ArgumentParser(add_help=False)
     debug.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help="print the traceback of errors")
-    parser = argparse.ArgumentParser(
-        prog="python -m gt2gs_blender",
+    parser = OneLineParser(
+        prog=PARSER_PROG,
         allow_abbrev=False,
         description="GT²-GS texture transfer for 3D Gaussian Splatting: command-line tools.",
     )
@@ -87,6 +104,12 @@ def _user_message(exc: BaseException) -> str:
     else:
         message = str(exc) or type(exc).__name__
     return " ".join(message.split())
+
+
+def _reader_gone() -> int:
+    """Exit as a Unix tool does when its output pipe closes (128 + SIGPIPE), silencing the flush at exit."""
+    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    return EXIT_PIPE
 
 
 def _fail(debug: bool, message: str, code: int) -> int:

@@ -9,6 +9,7 @@ so ``config_from_args`` applies only what the user typed on top of ``--preset``.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -61,7 +62,26 @@ def _argument_kind(meta: Setting, kind: type) -> dict[str, Any]:
     if kind is str:
         return {"type": str, "metavar": "PATH"}
     metavar = METAVARS.get(meta.unit, "N" if kind is int else "X")
-    return {"type": kind, "metavar": metavar}
+    return {"type": in_range(meta, kind), "metavar": metavar}
+
+
+def in_range(meta: Setting, kind: type) -> Callable[[str], Any]:
+    """An argparse type: ``kind`` (int or float) within the setting's range, so an error names the user's flag
+    ("argument --views: must be at least 1, got 0"), not the setting's field."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            expected = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        problem = meta.problem(value)
+        if problem is not None:
+            raise argparse.ArgumentTypeError(problem)
+        return value
+
+    parse.__name__ = kind.__name__  # argparse's own messages name the type
+    return parse
 
 
 def help_text(name: str, meta: Setting) -> str:

@@ -10,11 +10,13 @@ from ...core.atomic import Named, all_or_nothing, check_outputs, require_input
 from ...core.cameras.camera import Camera
 from ...core.cameras.files import load_views
 from ...core.cameras.llff import load_llff
+from ...core.errors import InputFileError
 from ...core.scene.files import output_format, read_scene
+from ...core.transfer.config import SETTINGS
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
 from .args import render_options, scene_input, scene_options
-from .options import add_setting_arguments, config_from_args
+from .options import add_setting_arguments, config_from_args, in_range
 from .parts import part_region
 
 
@@ -28,7 +30,13 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
     )
     views.add_argument("--llff", type=Path, metavar="DIR", help="an LLFF capture folder (poses_bounds.npy)")
-    views.add_argument("--views", dest="n_views", type=int, metavar="N", help="N automatic views around the scene")
+    views.add_argument(
+        "--views",
+        dest="n_views",
+        type=in_range(SETTINGS["n_views"], int),
+        metavar="N",
+        help="N automatic views around the scene",
+    )
 
 
 def _views(args: argparse.Namespace) -> list[Camera] | None:
@@ -64,7 +72,15 @@ def check_paths(args: argparse.Namespace) -> list[Named]:
     outputs = [(what, path) for what, path in given if path is not None]
     check_outputs(outputs, inputs)
     output_format(args.output)  # a format the tools write (SOG is read only)
+    for what, path in outputs:
+        suffix = NAMED_AS.get(what)
+        if suffix is not None and path.suffix.lower() != suffix:
+            raise InputFileError(path, f"{what} is written as {suffix.upper()[1:]}; end its name with {suffix}")
     return outputs
+
+
+NAMED_AS = {"--report": ".json", "--strip": ".png"}
+"""The file kind each side output is written as, which its name must say (a picture named .jpg would be a PNG)."""
 
 
 def cmd_transfer(args: argparse.Namespace) -> None:

@@ -161,14 +161,17 @@ def read_scene(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
 
 
 def output_format(path: PathLike, fmt: str | None = None) -> str:
-    """The format to write ``path`` in: ``fmt``, else the one its name ends with; an error for one we only read."""
+    """The format to write ``path`` in: ``fmt``, else the one its name ends with; an error for one we only read,
+    and for a name that ends with none (``out.txt`` would hold a PLY its name hides)."""
+    writable = ", ".join(ext for f in WRITERS for ext in FORMATS[f].extensions)
     if fmt is None:
         name = os.fspath(path).lower()
-        fmt = next((f for f in (COMPRESSED_PLY, PLY, SPZ, SPLAT, SOG) if name.endswith(FORMATS[f].extensions)), PLY)
+        fmt = next((f for f in (COMPRESSED_PLY, PLY, SPZ, SPLAT, SOG) if name.endswith(FORMATS[f].extensions)), None)
+        if fmt is None:
+            raise SplatFormatError(path, f"is not a splat file name; end it with one of {writable}")
     if fmt not in FORMATS:
         raise ValueError(f"unknown splat format {fmt!r}; choose one of {', '.join(FORMATS)}")
     if not FORMATS[fmt].writable:
-        writable = ", ".join(ext for f in WRITERS for ext in FORMATS[f].extensions)
         raise SplatFormatError(path, f"{FORMATS[fmt].label} is read only here; write one of {writable}")
     return fmt
 
