@@ -505,3 +505,42 @@ def test_the_before_after_strip_shows_the_run_s_own_cameras_when_given():
     assert all(max(c.width, c.height) == STRIP_SIZE for c in picked)
     ring = strip_cameras(scene, None, "-y")
     assert all(float(-c.world_to_cam[1, :3] @ np.array([0.0, -1.0, 0.0])) > 0.8 for c in ring)
+
+
+# -- preview ----------------------------------------------------------------------------------------
+
+
+def test_preview_command_writes_the_runs_first_view_as_the_engine_draws_it(capsys, small_ply, tmp_path):
+    """The picture is the engine's own preview of the run the same options would start (the oracle: the API's
+    ``preview`` with the same settings), the texture visibly on the scene, turned by ``--angle``."""
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+    from gt2gs_blender.core.transfer.presets import preset
+    from gt2gs_blender.core.transfer.texture import load_texture
+
+    x = np.arange(128)[None, :].repeat(128, axis=0)
+    bands = np.where((x // 32) % 2, 230, 20).astype(np.uint8)  # bands broader than the small torus's splats
+    texture = tmp_path / "bands.png"
+    cv2.imwrite(str(texture), np.stack([bands, bands, bands], axis=-1))
+    pictures = {}
+    texture_only = ("--keep-scene", "0", "--scene-colour", "0")  # the torus's own checker would hide the turn
+    for angle in ("0", "45"):
+        out = tmp_path / f"preview{angle}.png"
+        argv = ["preview", str(small_ply), str(texture), "-o", str(out), "--preset", "preview", *PORTABLE]
+        code, stdout, err = run(capsys, *argv, *texture_only, "--views", "4", "--angle", angle, "--size", "96")
+        assert code == 0, err
+        assert str(out) in stdout and "splats" in stdout
+        pictures[angle] = read_png(out)[..., ::-1]
+    config = preset("preview", n_views=4, backend="torch", device="cpu", keep_scene=0.0, scene_colour=0.0)
+    expected = preview(read_ply(small_ply), load_texture(texture), None, config, size=96).image
+    np.testing.assert_array_equal(pictures["0"], expected)
+    assert pictures["0"].shape == (96, 96, 3)
+    on = (pictures["0"] < 250).any(axis=-1)
+    assert on.mean() > 0.05  # the torus is in view
+    assert np.abs(pictures["0"].astype(int) - pictures["45"].astype(int))[on].mean() > 10  # the angle turns it
+
+
+def test_preview_to_a_name_that_is_no_png_is_refused(capsys, small_ply, tmp_path):
+    out = tmp_path / "preview.jpg"
+    code, _, err = run(capsys, "preview", str(small_ply), str(stripe_png(tmp_path)), "-o", str(out))
+    assert code == 2 and not out.exists()
+    assert_one_line_error(err, str(out), ".png")

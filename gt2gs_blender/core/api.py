@@ -2,6 +2,7 @@
 re-texture.
 
     from gt2gs_blender.core.api import read_scene, write_splats, auto_views, load_views, render, preset, transfer
+    from gt2gs_blender.core.api import preview  # the picture a run will start from, before running it
 
 Everything here is defined in the engine's packages; this module only gathers the public names
 (importing it loads torch).
@@ -19,6 +20,7 @@ from .scene.parts import Parts, find_parts, find_parts_in
 from .scene.ply import read_ply
 from .scene.ply_write import write_ply
 from .transfer.config import TransferConfig
+from .transfer.orientation_preview import Preview, preview
 from .transfer.pipeline import TransferResult, transfer
 from .transfer.presets import PRESETS, preset
 
@@ -30,6 +32,7 @@ __all__ = [
     "GT2GSError",
     "GaussianScene",
     "Parts",
+    "Preview",
     "Progress",
     "TransferConfig",
     "TransferResult",
@@ -38,6 +41,7 @@ __all__ = [
     "find_parts_in",
     "load_views",
     "preset",
+    "preview",
     "read_ply",
     "read_scene",
     "read_splats",

@@ -26,6 +26,7 @@ from .demo import add_demo_command
 from .fit import add_fit_command
 from .info import add_info_command
 from .parts import add_parts_command
+from .preview import add_preview_command
 from .render import add_render_command
 
 PROG = "gt2gs"
@@ -92,6 +93,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_demo_command(commands, debug)
     add_fit_command(commands, debug)
     transfer_cmd.add_transfer_command(commands, debug)
+    add_preview_command(commands, debug)
     add_convert_command(commands, debug)
     add_batch_command(commands, debug)
     return parser

@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from ...core.atomic import Named, all_or_nothing, check_outputs, require_input
 from ...core.cameras.camera import Camera
@@ -12,7 +15,8 @@ from ...core.cameras.files import load_views
 from ...core.cameras.llff import load_llff
 from ...core.errors import InputFileError
 from ...core.scene.files import output_format, read_scene
-from ...core.transfer.config import SETTINGS
+from ...core.scene.gaussians import GaussianScene
+from ...core.transfer.config import SETTINGS, TransferConfig
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
 from .args import render_options, scene_input, scene_options
@@ -53,9 +57,9 @@ def _views_source(args: argparse.Namespace) -> str | None:
     return None if source is None else str(source)
 
 
-def check_paths(args: argparse.Namespace) -> list[Named]:
-    """Refuse inputs that are no file (or folder) and outputs that would overwrite an input or cannot be
-    written, before any work; the outputs given."""
+def run_inputs(args: argparse.Namespace) -> list[Named]:
+    """Refuse inputs that are no file (or folder), before any work; the inputs a run reads (scene, texture, region,
+    views, weights), which no output may overwrite."""
     inputs = scene_input(args.scene)
     others = (
         ("texture", args.texture, False),
@@ -68,19 +72,52 @@ def check_paths(args: argparse.Namespace) -> list[Named]:
         if path is not None:
             require_input(what, path, folder=folder)
             inputs.append((what, path))
+    return inputs
+
+
+def check_paths(args: argparse.Namespace) -> list[Named]:
+    """Refuse inputs that are no file (or folder) and outputs that would overwrite an input or cannot be
+    written, before any work; the outputs given."""
     given = (("-o", args.output), ("--report", args.report), ("--strip", args.strip))
     outputs = [(what, path) for what, path in given if path is not None]
-    check_outputs(outputs, inputs)
+    check_outputs(outputs, run_inputs(args))
     output_format(args.output)  # a format the tools write (SOG is read only)
-    for what, path in outputs:
-        suffix = NAMED_AS.get(what)
-        if suffix is not None and path.suffix.lower() != suffix:
-            raise InputFileError(path, f"{what} is written as {suffix.upper()[1:]}; end its name with {suffix}")
+    check_named_as(outputs, NAMED_AS)
     return outputs
+
+
+def check_named_as(outputs: list[Named], kinds: dict[str, str]) -> None:
+    """Refuse an output whose name does not end as the kind of file it is written as (``kinds``: flag -> suffix)."""
+    for what, path in outputs:
+        suffix = kinds.get(what)
+        if suffix is not None and Path(path).suffix.lower() != suffix:
+            raise InputFileError(path, f"{what} is written as {suffix.upper()[1:]}; end its name with {suffix}")
 
 
 NAMED_AS = {"--report": ".json", "--strip": ".png"}
 """The file kind each side output is written as, which its name must say (a picture named .jpg would be a PNG)."""
+
+
+@dataclass(frozen=True)
+class Run:
+    """What a run reads, from the command line: the scene, the texture, the splats it restyles (None: all), its
+    views (None: automatic) and settings."""
+
+    scene: GaussianScene
+    texture: np.ndarray
+    region: np.ndarray | None
+    views: list[Camera] | None
+    config: TransferConfig
+
+
+def read_run(args: argparse.Namespace) -> Run:
+    """Read a run's inputs (checked before by :func:`run_inputs`) and settings."""
+    scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
+    texture = read_texture(args.texture)
+    region = load_region(args.region, len(scene)) if args.region is not None else None
+    if args.part is not None:
+        region = part_region(scene, args.part, args.scene)
+    return Run(scene, texture, region, _views(args), config_from_args(args))
 
 
 def cmd_transfer(args: argparse.Namespace) -> None:
@@ -97,27 +134,22 @@ _WROTE = {"-o": "stylised scene", "--report": "report", "--strip": "before/after
 
 def _transfer(args: argparse.Namespace) -> dict:
     """Read the inputs, run the transfer, write the outputs; the run's report."""
-    scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
-    texture = read_texture(args.texture)  # inputs are checked before any work starts
-    region = load_region(args.region, len(scene)) if args.region is not None else None
-    if args.part is not None:
-        region = part_region(scene, args.part, args.scene)
-    views, config = _views(args), config_from_args(args)
+    run = read_run(args)
     with TerminalProgress("transfer") as bar:
         result = run_transfer(
-            scene,
-            texture,
-            views,
-            config,
+            run.scene,
+            run.texture,
+            run.views,
+            run.config,
             args.output,
             report=args.report,
-            region=region,
+            region=run.region,
             progress=bar,
             scene_name=args.scene,
             views_name=_views_source(args),
         )
     if args.strip is not None:
-        write_before_after(args.strip, scene, result.scene, texture, views, config.up)
+        write_before_after(args.strip, run.scene, result.scene, run.texture, run.views, run.config.up)
     return result.report
 
 
@@ -130,8 +162,6 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
         "writes the stylised scene to OUT.ply.",
     )
-    p.add_argument("scene", type=Path, metavar="SCENE")
-    p.add_argument("texture", type=Path, metavar="TEXTURE")
     p.add_argument(
         "-o",
         "--output",
@@ -140,10 +170,19 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         metavar="OUT",
         help="the stylised scene: .ply, .compressed.ply, .spz or .splat",
     )
-    add_view_arguments(p)
-    add_setting_arguments(p, given=GIVEN)
+    add_run_arguments(p)
     p.add_argument("--report", type=Path, metavar="R.json", help="write the run's report as JSON")
     p.add_argument("--strip", type=Path, metavar="PNG", help="also write a before/after picture")
+    p.set_defaults(run=cmd_transfer)
+
+
+def add_run_arguments(p: argparse.ArgumentParser) -> None:
+    """What a run reads and how it runs (``transfer`` and ``preview``): the scene, the texture, the views, every
+    setting, and the splats it restyles."""
+    p.add_argument("scene", type=Path, metavar="SCENE")
+    p.add_argument("texture", type=Path, metavar="TEXTURE")
+    add_view_arguments(p)
+    add_setting_arguments(p, given=GIVEN)
     only = p.add_mutually_exclusive_group()
     only.add_argument(
         "--region",
@@ -158,7 +197,6 @@ def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         help="restyle only part N of the scene (see the parts command: found from the splats' colour and "
         "position, 0 the largest); the rest stay bit-identical",
     )
-    p.set_defaults(run=cmd_transfer)
 
 
 GIVEN = ("background", "backend", "device", "n_views")
