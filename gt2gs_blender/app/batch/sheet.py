@@ -20,6 +20,11 @@ SWATCH = TILE // 4
 TEXT_H = 54
 COLUMNS = 6
 FONT = cv2.FONT_HERSHEY_SIMPLEX
+TEXT_W = TILE - 8
+"""The text's width in a cell (4 px margins)."""
+NAME_SCALES = (0.42, 0.36, 0.3)
+"""The job's name at the largest of these it fits at (then wrapped, cut with '...')."""
+NOTE_SCALE = 0.36
 
 
 def write_contact_sheet(out: Path, rows: list[Row]) -> Path:
@@ -51,10 +56,11 @@ def _cell(out: Path, row: Row) -> np.ndarray:
         numbers = "not measured (the preset's Measure Result is off)"
     else:
         numbers = f"content {measures['content']:.3f}  structure {measures['structure']:.3f}"
-    _text(cell, row.job.name, TILE + 16, 0.42, (0, 0, 0))
-    _text(cell, numbers, TILE + 34, 0.36, (170, 0, 0) if row.status == "failed" else (40, 40, 40))
-    if len(numbers) > _fits(0.36):
-        _text(cell, numbers[_fits(0.36) :], TILE + 50, 0.36, (170, 0, 0))
+    name_scale = next((scale for scale in NAME_SCALES if _width(row.job.name, scale) <= TEXT_W), NAME_SCALES[-1])
+    _text(cell, wrapped(row.job.name, name_scale, 1)[0], TILE + 16, name_scale, (0, 0, 0))
+    colour = (170, 0, 0) if row.status == "failed" else (40, 40, 40)
+    for k, line in enumerate(wrapped(numbers, NOTE_SCALE, 2)):
+        _text(cell, line, TILE + 34 + 16 * k, NOTE_SCALE, colour)
     return cell
 
 
@@ -63,11 +69,30 @@ def _read(path: Path) -> np.ndarray | None:
     return None if image is None else image[..., ::-1]
 
 
-def _fits(scale: float) -> int:
-    """How many characters of text at ``scale`` fit across a cell."""
-    width = cv2.getTextSize("m", FONT, scale, 1)[0][0]
-    return max(1, (TILE - 8) // max(1, width))
+def _width(text: str, scale: float) -> int:
+    """The pixel width of ``text`` at ``scale``."""
+    return cv2.getTextSize(text, FONT, scale, 1)[0][0]
+
+
+def wrapped(text: str, scale: float, lines: int) -> list[str]:
+    """``text`` broken at spaces into at most ``lines`` lines that fit a cell at ``scale`` (a word longer than a
+    line is cut); text left over ends the last line with '...', so nothing is cut mid-word unseen."""
+    out: list[str] = []
+    words, cut = text.split(), False
+    while words and len(out) < lines and not cut:
+        line = words.pop(0)
+        while _width(line, scale) > TEXT_W:  # a word wider than a line: the rest of it is left over
+            line, cut = line[:-1], True
+        while words and not cut and _width(f"{line} {words[0]}", scale) <= TEXT_W:
+            line += " " + words.pop(0)
+        out.append(line)
+    if words or cut:
+        last = out[-1]
+        while last and _width(last + "...", scale) > TEXT_W:
+            last = last.rsplit(" ", 1)[0] if " " in last else last[:-1]
+        out[-1] = last + "..."
+    return out
 
 
 def _text(cell: np.ndarray, text: str, y: int, scale: float, colour: tuple[int, int, int]) -> None:
-    cv2.putText(cell, text[: _fits(scale)], (4, y), FONT, scale, colour, 1, cv2.LINE_AA)
+    cv2.putText(cell, text, (4, y), FONT, scale, colour, 1, cv2.LINE_AA)
