@@ -14,6 +14,7 @@ a failed job is a row of the table, and the exit status is 1 when any failed.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import json
 import math
@@ -113,13 +114,28 @@ def main(argv: list[str] | None = None) -> int:
     args = parse_args(script_args(sys.argv) if argv is None else argv)
     ensure_registered()
     try:
-        if args.manifest is not None:
-            return run_manifest(args)
-        run(args)
+        with contextlib.redirect_stdout(WithoutErrorEcho(sys.stdout)):
+            if args.manifest is not None:
+                return run_manifest(args)
+            run(args)
     except (RuntimeError, ValueError, OSError, extension_module("core.errors").GT2GSError) as exc:
         sys.stderr.write(f"gt2gs: error: {error_line(exc)}\n")
         return 1
     return 0
+
+
+class WithoutErrorEcho:
+    """A stdout without Blender's echo of an operator's error (``Error: ...``), which the error line says once."""
+
+    def __init__(self, stream) -> None:
+        self.stream = stream
+
+    def write(self, text: str) -> int:
+        """Pass ``text`` on unless it is an error report (Blender writes each report in one call)."""
+        return len(text) if text.startswith("Error: ") else self.stream.write(text)
+
+    def __getattr__(self, name: str):
+        return getattr(self.stream, name)
 
 
 def error_line(exc: BaseException) -> str:

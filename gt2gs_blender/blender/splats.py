@@ -13,7 +13,8 @@ export. Two display attributes are added and never exported:
   1σ ellipse across its two largest axes, clamped to 5% of the scene's extent against floaters.
 
 The source layout (property order and types), file format and path are kept as JSON in the custom
-property ``gt2gs_ply`` of the PointCloud data, so an unchanged object exports byte for byte.
+property ``gt2gs_ply`` of the PointCloud data, so an unchanged object exports byte for byte. The path
+(a transfer's result keeps its original's) is the file Export refuses to overwrite.
 
 The PLY is in the object's local space; exporting may bake the object's world transform.
 Nothing here loops over points in Python.

@@ -407,7 +407,7 @@ class TransferRun:
 
 
 def apply_result(context, object_name: str, path: str, mode: str):
-    """Add the result PLY as a new splat object beside the source, or swap it into the source (in place)."""
+    """Add the result PLY as a new splat object beside the source, or in place, remembering the source's file."""
     from ..core.scene.ply import read_ply_arrays
 
     source = bpy.data.objects.get(object_name)
@@ -419,6 +419,7 @@ def apply_result(context, object_name: str, path: str, mode: str):
         arrays,
         source.name + RESULT_SUFFIX,
         collection,
+        source_path=splats.get_meta(source.data).get("source"),
         source_format="binary_little_endian",
         with_material=bool(source.data.materials),
     )

@@ -36,6 +36,16 @@ def export_target(context):
     return selected[0] if len(selected) == 1 else None
 
 
+def imported_from(path: str, obj, overwrites) -> object | None:
+    """The splat object (``obj`` first, then any in the file) whose imported original writing ``path`` would
+    replace (a transfer's result keeps its original's), else None."""
+    for candidate in (obj, *bpy.data.objects):
+        source = splats.get_meta(candidate.data).get("source") if splats.is_splat_object(candidate) else None
+        if source and overwrites(path, source):
+            return candidate
+    return None
+
+
 class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
     """Export the active Gaussian splat object as a splat file (PLY, compressed PLY, SPZ or .splat)"""
 
@@ -56,8 +66,8 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
     )
     overwrite_source: BoolProperty(
         name="Overwrite Imported File",
-        description="Allow writing over the file this object was imported from; otherwise that is refused, so "
-        "the original is never replaced by accident",
+        description="Allow writing over the file this object was imported from (a transfer's result: its "
+        "original's); otherwise that is refused, so the original is never replaced by accident",
         default=False,
     )
     ply_format: EnumProperty(
@@ -108,12 +118,12 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
 
         encoding = ENCODINGS[self.ply_format] or splats.get_meta(obj.data).get("format") or "binary_little_endian"
         path = bpy.path.abspath(self.filepath)
-        source = splats.get_meta(obj.data).get("source")
-        if source and not self.overwrite_source and overwrites(path, source):
+        owner = None if self.overwrite_source else imported_from(path, obj, overwrites)
+        if owner is not None:
             self.report(
                 {"ERROR"},
-                f"{path}: is the file {obj.name} was imported from; choose another path, or tick Overwrite "
-                "Imported File to replace it",
+                f"{path}: is your imported original, the file {owner.name!r} comes from; choose another path, or "
+                "tick Overwrite Imported File to replace it",
             )
             return {"CANCELLED"}
         try:

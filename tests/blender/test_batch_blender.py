@@ -35,8 +35,10 @@ def test_the_batch_script_runs_a_manifest(fresh, tmp_path, capsys):
     )
     out = tmp_path / "out"
     assert batch.main(["--manifest", str(manifest), "--out", str(out)]) == 1
-    err = capsys.readouterr().err
-    assert f"gt2gs: error: 1 of 3 jobs failed; see {out / 'summary.md'}" in err
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [f"gt2gs: error: 1 of 3 jobs failed; see {out / 'summary.md'}"]
+    said = [line for line in captured.out.splitlines() if "bad.png" in line]
+    assert len(said) == 1 and said[0].startswith("gt2gs: failed blob-bad-angle0: ")  # not Blender's echo too
     for name in ("blob-stripes-angle0", "blob-stripes-angle90"):
         report = json.loads((out / name / "report.json").read_text())
         assert report["batch"]["job"] == name and len(report["batch"]["settings_hash"]) == 64

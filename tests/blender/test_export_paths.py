@@ -6,6 +6,7 @@ command line's output rules before importing anything."""
 from __future__ import annotations
 
 import os
+import shutil
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,7 @@ bpy = pytest.importorskip("bpy", exc_type=ModuleNotFoundError)
 pytest.importorskip("torch", exc_type=ModuleNotFoundError, reason="the scenes and the path rules are the engine's")
 
 from gt2gs_blender.app.cli.demo import torus_scene
+from gt2gs_blender.blender import transfer_run
 from gt2gs_blender.core.scene.files import read_splats, write_splats
 
 from ..test_bad_paths import ALIASES, SCENES, alias, no_hang, snapshot
@@ -44,8 +46,19 @@ def test_export_onto_the_imported_file_is_refused(fresh, folder, fmt, kind):
     imported(SCENES[fmt])
     target = alias(SCENES[fmt], kind)
     before = snapshot(folder)
-    with pytest.raises(RuntimeError, match=r"was imported from.*Overwrite Imported File"):
+    with pytest.raises(RuntimeError, match=r"is your imported original.*Overwrite Imported File"):
         bpy.ops.gt2gs.export_ply(filepath=os.path.abspath(target))
+    assert snapshot(folder) == before
+
+
+def test_export_onto_another_objects_imported_file_is_refused(fresh, folder):
+    """Two captures in one .blend: exporting the active one over the other's original is refused too."""
+    imported("scene.ply")
+    active = imported("scene.spz")
+    assert bpy.context.active_object == active
+    before = snapshot(folder)
+    with pytest.raises(RuntimeError, match=r"scene\.ply: is your imported original, the file 'scene' comes from"):
+        bpy.ops.gt2gs.export_ply(filepath=os.path.abspath("scene.ply"))
     assert snapshot(folder) == before
 
 
@@ -53,6 +66,24 @@ def test_export_onto_the_imported_file_when_asked_to(fresh, folder):
     obj = imported("scene.spz")
     assert bpy.ops.gt2gs.export_ply(filepath=os.path.abspath("scene.spz"), overwrite_source=True) == {"FINISHED"}
     assert len(read_splats("scene.spz")) == len(obj.data.points)
+
+
+@pytest.mark.parametrize("mode", ["NEW", "IN_PLACE"])
+def test_a_transfer_result_is_not_exported_onto_the_file_its_original_was_imported_from(fresh, folder, donut, mode):
+    """The artist imports donut.ply, transfers a texture and exports "donut GT²" as donut.ply: refused, the file
+    kept byte for byte, unless Overwrite Imported File is ticked."""
+    original = folder / "donut.ply"
+    shutil.copyfile(donut, original)
+    kept = original.read_bytes()
+    source = imported(str(original))
+    result = transfer_run.apply_result(bpy.context, source.name, str(folder / "scene.ply"), mode)  # the worker's
+    assert bpy.context.active_object == result
+    with pytest.raises(RuntimeError, match=r"is your imported original.*Overwrite Imported File") as caught:
+        bpy.ops.gt2gs.export_ply(filepath=str(original))
+    assert str(original) in str(caught.value) and len(str(caught.value).strip().splitlines()) == 1
+    assert original.read_bytes() == kept
+    assert bpy.ops.gt2gs.export_ply(filepath=str(original), overwrite_source=True) == {"FINISHED"}
+    assert len(read_splats(original)) == len(result.data.points) != len(read_splats(donut))
 
 
 @pytest.mark.parametrize(

@@ -16,13 +16,12 @@ from ...core.atomic import all_or_nothing, check_outputs, require_input
 from ...core.features.weights import ENV_VAR
 from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
-from ...core.transfer.config import SETTINGS
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
 from .args import render_options, scene_input, scene_options
-from .options import add_setting_arguments, config_from_args, in_range
-from .transfer import GIVEN
+from .options import add_setting_arguments, config_from_args
+from .transfer import GIVEN, add_views_option
 
 SHARED = Path(__file__).resolve().parents[3].parent / "shared"
 """The project's shared data beside the checkout (development and CI); absent in an installed product."""
@@ -46,13 +45,7 @@ def add_demo_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--scene", type=Path, metavar="SCENE", help="use this scene instead of the donut")
     p.add_argument("--texture", type=Path, metavar="IMAGE", help="use this texture instead of the default")
-    p.add_argument(
-        "--views",
-        dest="n_views",
-        type=in_range(SETTINGS["n_views"], int),
-        metavar="N",
-        help="number of automatic views (default: the preset's)",
-    )
+    add_views_option(p, "number of automatic views (default: the preset's)")
     add_setting_arguments(p, given=GIVEN)
     p.set_defaults(run=cmd_demo)
 

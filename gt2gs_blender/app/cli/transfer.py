@@ -34,13 +34,12 @@ def add_view_arguments(p: argparse.ArgumentParser) -> None:
         help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
     )
     views.add_argument("--llff", type=Path, metavar="DIR", help="an LLFF capture folder (poses_bounds.npy)")
-    views.add_argument(
-        "--views",
-        dest="n_views",
-        type=in_range(SETTINGS["n_views"], int),
-        metavar="N",
-        help="N automatic views around the scene",
-    )
+    add_views_option(views, "N automatic views around the scene")
+
+
+def add_views_option(parser: Any, help: str) -> None:
+    """``--views N``: the count of automatic views, within the ``n_views`` setting's range."""
+    parser.add_argument("--views", dest="n_views", type=in_range(SETTINGS["n_views"], int), metavar="N", help=help)
 
 
 def _views(args: argparse.Namespace) -> list[Camera] | None:
