@@ -100,9 +100,9 @@ class TransferConfig(SpeedSettings):
         0.15,
         "Scene Colour",
         "How much of the capture's own colour shows under the laid-out texture: 0 colours it with the "
-        "texture alone; 0.15 mixes in 15 % of each spot's own colour, so parts that differ only in hue "
-        "(pink icing on beige dough, a robot's eyes) stay apart and the capture reads at a glance; 1 keeps "
-        "the capture's colours with no texture",
+        "texture alone; 0.15 mixes in 15 % of each spot's own colour, a trace of each part's hue; 0.3-0.5 "
+        "keeps parts that differ only in hue (pink icing on beige dough, a robot's eyes) plainly apart, at the "
+        "texture's expense; 1 keeps the capture's colours with no texture",
         "texture",
         min=0.0,
         max=1.0,
