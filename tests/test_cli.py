@@ -456,9 +456,19 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     assert config["depth_ratio"] == 1.5
 
 
-def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):
+@pytest.mark.parametrize(
+    ("values", "words"),
+    [
+        (np.zeros((3, 3), dtype=np.float32), "1-D array of indices or booleans"),
+        (np.zeros(1200, dtype=bool), "selects no Gaussian"),
+        (np.array([], dtype=np.int64), "selects no Gaussian"),
+        (np.array([5, 10_000_000]), "indices must lie in 0..1199 (the scene's 1200 Gaussians), got 5..10000000"),
+    ],
+    ids=["floats", "all-false", "no-index", "out-of-range"],
+)
+def test_transfer_command_bad_region_is_one_line_naming_the_file(capsys, small_ply, tmp_path, values, words):
     region = tmp_path / "region.npy"
-    np.save(region, np.zeros((3, 3), dtype=np.float32))
+    np.save(region, values)
     code, _, err = run(
         capsys,
         "transfer",
@@ -471,7 +481,7 @@ def test_transfer_command_bad_region_is_one_line(capsys, small_ply, tmp_path):
         str(region),
     )
     assert code == 2
-    assert_one_line_error(err, str(region))
+    assert_one_line_error(err, f"{region}: ", words)
 
 
 @pytest.mark.parametrize(

@@ -28,6 +28,7 @@ from ..core.scene.files import write_splats
 from ..core.scene.gaussians import GaussianScene
 from ..core.transfer.config import TransferConfig
 from ..core.transfer.pipeline import TransferResult, transfer
+from ..core.transfer.region import region_problem
 from ..core.transfer.texture import load_texture
 from ..core.transfer.visibility import require_visible
 from .images import write_png
@@ -62,6 +63,9 @@ def load_region(path: Path, n: int) -> np.ndarray:
         raise InputFileError(
             path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} {region.shape}"
         )
+    problem = region_problem(region, n)
+    if problem is not None:
+        raise InputFileError(path, f"the region {problem}")
     return region
 
 

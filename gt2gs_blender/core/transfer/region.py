@@ -57,18 +57,29 @@ def region_mask(region: torch.Tensor | np.ndarray | None, n: int, device: torch.
     if region is None:
         return None
     region = torch.as_tensor(np.asarray(region) if not isinstance(region, torch.Tensor) else region)
+    problem = region_problem(region, n)
+    if problem is not None:
+        raise GT2GSError(f"the region {problem}")
+    if region.dtype == torch.bool:
+        return region.to(device)
+    return torch.zeros(n, dtype=torch.bool).index_fill_(0, region.long().reshape(-1), True).to(device)
+
+
+def region_problem(region: torch.Tensor | np.ndarray, n: int) -> str | None:
+    """Why ``region`` (a bool mask or an index array) cannot select Gaussians of a scene of ``n``, as the end of
+    a sentence about it ('selects none: ...'), else None: the one rule the engine and a region file's reader use."""
+    region = torch.as_tensor(np.asarray(region) if not isinstance(region, torch.Tensor) else region)
     if region.dtype == torch.bool:
         if region.shape != (n,):
-            raise GT2GSError(f"the region mask has {tuple(region.shape)} entries for a scene of {n} Gaussians")
-        mask = region
+            return f"mask has {tuple(region.shape)} entries for a scene of {n} Gaussians"
+        selected = bool(region.any())
     else:
         index = region.long().reshape(-1)
-        if len(index) and (int(index.min()) < 0 or int(index.max()) >= n):
-            raise GT2GSError(f"region indices must lie in [0, {n}), got {int(index.min())}..{int(index.max())}")
-        mask = torch.zeros(n, dtype=torch.bool).index_fill_(0, index, True)
-    if not bool(mask.any()):
-        raise GT2GSError("the region is empty: select at least one Gaussian to restyle")
-    return mask.to(device)
+        low, high = (int(index.min()), int(index.max())) if len(index) else (0, 0)
+        if low < 0 or high >= n:
+            return f"indices must lie in 0..{n - 1} (the scene's {n} Gaussians), got {low}..{high}"
+        selected = len(index) > 0
+    return None if selected else "selects no Gaussian: select at least one to restyle"
 
 
 def stylise_start(original: GaussianScene, selected: torch.Tensor | None, degree: int) -> GaussianScene:
