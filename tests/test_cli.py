@@ -460,11 +460,12 @@ def test_transfer_command_region_and_switches(capsys, small_ply, tmp_path):
     ("values", "words"),
     [
         (np.zeros((3, 3), dtype=np.float32), "1-D array of indices or booleans"),
+        (np.ones(5, dtype=bool), "mask has (5,) entries for a scene of 1200 Gaussians"),
         (np.zeros(1200, dtype=bool), "selects no Gaussian"),
         (np.array([], dtype=np.int64), "selects no Gaussian"),
         (np.array([5, 10_000_000]), "indices must lie in 0..1199 (the scene's 1200 Gaussians), got 5..10000000"),
     ],
-    ids=["floats", "all-false", "no-index", "out-of-range"],
+    ids=["floats", "short-mask", "all-false", "no-index", "out-of-range"],
 )
 def test_transfer_command_bad_region_is_one_line_naming_the_file(capsys, small_ply, tmp_path, values, words):
     region = tmp_path / "region.npy"

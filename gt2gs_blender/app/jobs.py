@@ -56,10 +56,7 @@ def load_npy(path: Path, what: str) -> np.ndarray:
 def load_region(path: Path, n: int) -> np.ndarray:
     """A region file: a .npy of Gaussian indices, or of n booleans (True = restyle)."""
     region = load_npy(path, "the region")
-    if region.dtype == np.bool_:
-        if region.shape != (n,):
-            raise InputFileError(path, f"a boolean region needs {n} entries (one per Gaussian), has {region.shape}")
-    elif not np.issubdtype(region.dtype, np.integer) or region.ndim != 1:
+    if region.dtype != np.bool_ and (not np.issubdtype(region.dtype, np.integer) or region.ndim != 1):
         raise InputFileError(
             path, f"the region must be a 1-D array of indices or booleans, got {region.dtype} {region.shape}"
         )

@@ -110,7 +110,9 @@ def _user_message(exc: BaseException) -> str:
 
 def _reader_gone() -> int:
     """Exit as a Unix tool does when its output pipe closes (128 + SIGPIPE), silencing the flush at exit."""
-    os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
     return EXIT_PIPE
 
 

@@ -80,7 +80,6 @@ def in_range(meta: Setting, kind: type) -> Callable[[str], Any]:
             raise argparse.ArgumentTypeError(problem)
         return value
 
-    parse.__name__ = kind.__name__  # argparse's own messages name the type
     return parse
 
 

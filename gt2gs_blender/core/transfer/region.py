@@ -71,7 +71,7 @@ def region_problem(region: torch.Tensor | np.ndarray, n: int) -> str | None:
     region = torch.as_tensor(np.asarray(region) if not isinstance(region, torch.Tensor) else region)
     if region.dtype == torch.bool:
         if region.shape != (n,):
-            return f"mask has {tuple(region.shape)} entries for a scene of {n} Gaussians"
+            return f"mask has {tuple(region.shape)} entries for a scene of {n} Gaussians (one per Gaussian)"
         selected = bool(region.any())
     else:
         index = region.long().reshape(-1)
