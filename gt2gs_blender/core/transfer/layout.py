@@ -53,7 +53,7 @@ from ..scene.inria import SH_C0
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .grain import periodic_blur
-from .metrics import LUMA
+from .losses import LUMA
 from .setting import Projection
 from .shade import kept_scene, layout_shade, shading, spatial_blur, under_scene
 from .texture_bank import bank_scales, screen_rotation

@@ -1,5 +1,5 @@
 """The stylisation loss pieces: cosine distance and nearest texture features (NNFM, paper Eq. 3), content,
-image TV, scale regulariser.
+the layout's pixels, image TV, scale regulariser.
 
 Conventions that differ from the authors' code on purpose (docs/architecture.md, "The method and the
 authors' code"): cosine similarity is taken over the CHANNEL axis of feature maps (theirs normalises over
@@ -10,6 +10,10 @@ from __future__ import annotations
 
 import torch
 import torch.nn.functional as F
+
+LUMA = (0.2126, 0.7152, 0.0722)
+"""Rec. 709 luminance weights: light and dark apart from hue (the layout loss, the preview's shading,
+``preview_ssim``)."""
 
 COSINE_EPS = 1e-8
 """Norm floor when normalising feature vectors (a zero vector has cosine 0 with everything)."""
@@ -59,12 +63,17 @@ def content_loss(feats: torch.Tensor, content_feats: torch.Tensor) -> torch.Tens
 
 def layout_loss(image: torch.Tensor, layout: torch.Tensor) -> torch.Tensor:
     """Mean absolute difference between a render (H, W, 3) and the laid-out texture (H, W, 4: colour and
-    coverage), on the pixels the layout covers: the texture's structure, pixel for pixel (a black texel
-    counts as much as any other)."""
+    coverage), on the pixels the layout covers, in luma and the two colour differences (R - Y, B - Y): the
+    texture's structure, pixel for pixel (a black texel counts as much as any other). A step in light and
+    dark costs what it costs in RGB; a step in one channel costs 3-6x more, so the texture loss draws a
+    texture's dark gaps dark rather than buying them as dots of another hue (magenta at woven straw's
+    crossings, where a per-channel L1 charged a green-only step a third of a grey one)."""
     covered = layout[..., 3] > 0
     if not bool(covered.any()):
         return image.sum() * 0.0
-    return (image - layout[..., :3]).abs()[covered].mean()
+    diff = (image - layout[..., :3])[covered]
+    luma = diff @ torch.tensor(LUMA, dtype=diff.dtype, device=diff.device)
+    return (luma.abs() + (diff[:, 0] - luma).abs() + (diff[:, 2] - luma).abs()).mean()
 
 
 def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:

@@ -36,13 +36,11 @@ from ..features.lpips import LPIPS
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..train.ssim import WINDOW, gaussian_window, ssim, ssim_map
-from .losses import cosine_distance, nearest_features
+from .losses import LUMA, cosine_distance, nearest_features
 from .texture_bank import covered_cells
 
 SHORT_RANGE = 1
 LONG_RANGE = 7
-LUMA = (0.2126, 0.7152, 0.0722)
-"""Rec. 709 luminance weights (the preview's shading, and ``preview_ssim``: structure, not colour)."""
 COVERED = 0.5
 """Pixels the result covers at least this much count in ``preview_ssim``."""
 OBJECT_BLUR = 1.0 / 20.0

@@ -29,7 +29,7 @@ from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
 from .layout import lay_out, layout_shading
-from .metrics import LUMA
+from .losses import LUMA
 from .plan import RunPlan, plan_run
 from .region import assemble
 from .shade import kept_scene, shading, under_scene

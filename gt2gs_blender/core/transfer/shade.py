@@ -32,7 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from ..scene.gaussians import GaussianScene
-from .metrics import LUMA
+from .losses import LUMA
 
 SHADE_MIN = 0.02
 """Luminance ratios below this count as this (a black splat is a very dark one, not a zero to a power)."""
