@@ -29,7 +29,9 @@ Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM")
 held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
 the texture (the structure measures reward the texture alone; this is the other side of the trade). The
 original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade) and
-cover every pixel the measure counts.
+cover every pixel the measure counts. ``colour_specks`` ("specks") is the share of the object's pixels whose hue
+stands out from their neighbourhood: colour noise a run adds (the original row holds the scene's own: sprinkles,
+flowers).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -55,6 +57,7 @@ from typing import Any
 import cv2
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
@@ -78,6 +81,20 @@ STRUCTURED = ("herringbone_wood", "brick_wall", "honeycomb", "toy_bricks", "wove
 MEASURES = ("gram", "gabor")
 TOP = 3
 NEEDED = 5
+SUMMED = (
+    "preview_gram",
+    "preview_gabor",
+    "original_preview_gram",
+    "original_preview_gabor",
+    "content_ssim",
+    "colour_specks",
+)
+"""The row fields a summary averages per scene and variant."""
+Views = list[tuple[np.ndarray, np.ndarray]]
+"""(RGB uint8, alpha) per held-out view."""
+SPECK_WINDOW = 5
+SPECK_CHROMA = 0.06
+"""A chroma step a viewer sees as a dot of another hue (the woven straw's magenta dots: ~0.2)."""
 TILE = 160
 SHEET_VIEWS = 2
 """Held-out views per result on the contact sheet."""
@@ -151,7 +168,7 @@ def sketched(
     return [(sketch(plan, cam, max(cam.width, cam.height)), a) for cam, a in zip(bench.held_out, alphas, strict=True)]
 
 
-def content_ssim(views: list[tuple[np.ndarray, np.ndarray]], original: list[tuple[np.ndarray, np.ndarray]]) -> float:
+def content_ssim(views: Views, original: Views) -> float:
     """How much of the scene is still there: luminance SSIM of each view to the original's render of it, over
     the original's object pixels, mean over the views (1: the original; the structure measures ignore it)."""
     luma = torch.tensor(measure.LUMA)
@@ -161,6 +178,31 @@ def content_ssim(views: list[tuple[np.ndarray, np.ndarray]], original: list[tupl
         values.append(masked_ssim(a[..., None], b[..., None], torch.from_numpy(alpha > measure.MASK_ALPHA)))
     covered = [v for v in values if v is not None]
     return float(np.mean(covered)) if covered else float("nan")
+
+
+def colour_specks(views: Views, original: Views) -> float:
+    """Colour noise: the share of the object's pixels whose chroma (R - Y, B - Y) lies further than
+    ``SPECK_CHROMA`` from the median chroma of their ``SPECK_WINDOW`` px neighbourhood, mean over the views
+    (the original's own specks, a sprinkle or a flower, are its row's value; no loss looks at a neighbourhood)."""
+    luma = torch.tensor(measure.LUMA)
+    values = []
+    for (rgb, _), (_, alpha) in zip(views, original, strict=True):
+        image = torch.from_numpy(measure.to_float(rgb))
+        y = image @ luma
+        chroma = torch.stack([image[..., 0] - y, image[..., 2] - y])[None]
+        pad = SPECK_WINDOW // 2
+        around = F.unfold(F.pad(chroma, (pad, pad, pad, pad), mode="replicate"), SPECK_WINDOW)
+        median = around.view(2, SPECK_WINDOW**2, -1).median(1).values.view_as(chroma[0])
+        far = (chroma[0] - median).norm(dim=0) > SPECK_CHROMA
+        mask = torch.from_numpy(alpha > measure.MASK_ALPHA)
+        if mask.any():
+            values.append(float(far[mask].float().mean()))
+    return float(np.mean(values)) if values else float("nan")
+
+
+def scene_side(views: Views, original: Views) -> dict[str, float]:
+    """The row's measures of the scene's side: ``content_ssim`` and ``colour_specks``."""
+    return {"content_ssim": content_ssim(views, original), "colour_specks": colour_specks(views, original)}
 
 
 def from_preview(views: list[measure.ViewStats], preview: list[measure.ViewStats]) -> dict[str, float]:
@@ -268,13 +310,13 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
         sheet[texture] = [tile(image, texture)]
         previews: dict[str, list[measure.ViewStats]] = {}
         r = row(name, texture, "original", original)
-        r["content_ssim"] = 1.0  # the original is the scene
+        r.update(scene_side(original_views, original_views))  # content 1: the original is the scene
         for height in args.projected_heights:
             views = projected(bench, texture_path(texture), height, base_config, alphas)
             variant = f"projected-{height}"
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats))
-            p["content_ssim"] = content_ssim(views, original_views)
+            p.update(scene_side(views, original_views))
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
         for preset_name, run in starts.items():
@@ -284,14 +326,14 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 views = sketched(run, bench, texture_path(texture), alphas)
                 previews[variant] = view_stats(views)
                 p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
-                p["content_ssim"] = content_ssim(views, original_views)
+                p.update(scene_side(views, original_views))
                 rows.append(p)
                 sheet[texture].append(tile(views[0][0], ranks_label(p, "sketch")))
                 continue
             views = held_out_renders(layout_start(run, texture_path(texture)), bench)
             previews[variant] = view_stats(views)
             p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
-            p["content_ssim"] = content_ssim(views, original_views)
+            p.update(scene_side(views, original_views))
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
             pictures.mkdir(parents=True, exist_ok=True)
@@ -300,7 +342,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             surface = variant.removesuffix("-start") + "-surface"
             views = layout_surface(run, bench, texture_path(texture))
             p = row(name, texture, surface, score(view_stats(views), stats))
-            p["content_ssim"] = content_ssim(views, original_views)
+            p.update(scene_side(views, original_views))
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, "surface")))
         first = references[args.presets[0]]
@@ -342,7 +384,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 result_stats = view_stats(views)
                 t = row(name, texture, variant, score(result_stats, stats), seconds)
                 t["features"] = features
-                t["content_ssim"] = content_ssim(views, original_views)
+                t.update(scene_side(views, original_views))
                 t.update(
                     preview_fields(from_preview(result_stats, previews[reference]), reference, starts[preset_name])
                 )
@@ -405,7 +447,7 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
             s[f"top1_{m}"] += r[f"{m}_rank"] == 1
             s[f"top{TOP}_{m}"] += r[f"{m}_rank"] <= TOP
         s[f"top{TOP}_both"] += all(r[f"{m}_rank"] <= TOP for m in MEASURES)
-        for key in ("preview_gram", "preview_gabor", "original_preview_gram", "original_preview_gabor", "content_ssim"):
+        for key in SUMMED:
             if key in r:
                 s.setdefault(f"{key}_values", []).append(r[key])
     for variants in out.values():
@@ -422,8 +464,8 @@ def is_transfer(variant: str) -> bool:
 
 def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
     print(
-        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10}   "
-        "from preview gram / gabor (original's)"
+        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10} "
+        f"{'specks':>6}   from preview gram / gabor (original's)"
     )
     for r in rows:
         sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
@@ -435,11 +477,11 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
             preview += f" vs {r['preview_reference']}"
         print(
             f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
-            f"{r['content_ssim']:>10.3f}   {preview}"
+            f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f}   {preview}"
         )
     print(
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
-        "scene SSIM (how much of the original scene shows; mean)"
+        "scene SSIM (how much of the original scene shows; mean), colour specks (share of pixels; mean)"
     )
     met: dict[str, bool] = {}
     for scene, variants in summary.items():
@@ -453,7 +495,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
             print(
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
-                f"scene SSIM {s['mean_content_ssim']:.3f}{preview}"
+                f"scene SSIM {s['mean_content_ssim']:.3f}   specks {s['mean_colour_specks']:.3f}{preview}"
             )
             if is_transfer(variant):
                 met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED
