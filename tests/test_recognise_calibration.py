@@ -64,3 +64,20 @@ def test_a_layout_off_run_is_compared_with_the_sketch_its_preview_shows():
     cam = bench.held_out[0]
     shown = show(replace(runs[0], cameras=[cam]), size=max(cam.width, cam.height)).image
     np.testing.assert_array_equal(first[0], shown)
+
+
+def test_colour_specks_count_dots_of_another_hue_and_not_light_and_dark():
+    """The bench's colour-noise measure: a flat image has none; 9 isolated magenta dots on grey are 9 / the object's
+    pixels; the same dots in dark grey (a texture's dark gaps) are none; pixels off the object do not count."""
+    grey = np.full((60, 60, 3), 128, np.uint8)
+    alpha = np.ones((60, 60), np.float32)
+    assert recognise.colour_specks([(grey, alpha)], [(grey, alpha)]) == 0.0
+    dots = (slice(10, 50, 15), slice(10, 50, 15))  # a 3 x 3 lattice of single pixels
+    magenta, dark = grey.copy(), grey.copy()
+    magenta[dots] = (170, 90, 150)
+    dark[dots] = (60, 60, 60)
+    assert recognise.colour_specks([(magenta, alpha)], [(grey, alpha)]) == pytest.approx(9 / 3600)
+    assert recognise.colour_specks([(dark, alpha)], [(grey, alpha)]) == 0.0
+    half = alpha.copy()
+    half[:, 30:] = 0.0  # the object's left half holds 6 of the dots (columns 10 and 25)
+    assert recognise.colour_specks([(magenta, alpha)], [(grey, half)]) == pytest.approx(6 / 1800)
