@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 from pathlib import Path
-from typing import get_args
+from typing import Any, get_args
 
 from ...core.atomic import Named, require_input
 from ...core.scene.files import SOG_META
@@ -75,6 +75,14 @@ def scene_options() -> argparse.ArgumentParser:
         "--drop-invalid", action="store_true", help="load files with NaN/Inf Gaussians by dropping those Gaussians"
     )
     return parent
+
+
+def add_scene_command(
+    commands: Any, debug: argparse.ArgumentParser, name: str, **texts: str
+) -> argparse.ArgumentParser:
+    """A subcommand that reads a scene and renders it: the debug, scene and rendering options, then ``texts``
+    (``help``, ``description``)."""
+    return commands.add_parser(name, parents=[debug, scene_options(), render_options()], **texts)
 
 
 def render_options(

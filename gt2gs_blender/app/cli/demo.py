@@ -19,7 +19,7 @@ from ...core.scene.gaussians import GaussianScene
 from ...core.transfer.texture import load_texture
 from ..jobs import run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import render_options, scene_input, scene_options
+from .args import add_scene_command, scene_input
 from .options import add_setting_arguments, config_from_args
 from .transfer import GIVEN, add_views_option
 
@@ -32,9 +32,10 @@ SHARED_WEIGHTS = SHARED / "weights"
 
 def add_demo_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``demo`` subcommand."""
-    p = commands.add_parser(
+    p = add_scene_command(
+        commands,
+        debug,
         "demo",
-        parents=[debug, scene_options(), render_options()],
         help="texture-transfer the demo scene (what `make demo` runs)",
         description="Re-texture the shared donut scene with a shared texture (or a generated torus and "
         "stripes when ../shared is absent): writes DIR/stylised.ply, DIR/before_after.png and "

@@ -10,7 +10,7 @@ from typing import Any
 from ...core.atomic import all_or_nothing, check_outputs
 from ...core.transfer.orientation_preview import preview
 from ..images import write_png
-from .args import positive_int, render_options, scene_options
+from .args import add_scene_command, positive_int
 from .transfer import add_run_arguments, check_named_as, read_run, run_inputs
 
 SIZE = 512
@@ -19,9 +19,10 @@ SIZE = 512
 
 def add_preview_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``preview`` subcommand."""
-    p = commands.add_parser(
+    p = add_scene_command(
+        commands,
+        debug,
         "preview",
-        parents=[debug, scene_options(), render_options()],
         help="picture how the texture will lie before a transfer (PNG)",
         description="Draw the first view of the run `transfer` would start with the same options (the texture "
         "laid out on the scene, before any optimisation) as a PNG, and say how many splats the run starts from.",

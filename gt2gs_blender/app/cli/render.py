@@ -26,7 +26,7 @@ from ...core.scene.files import read_scene
 from ...core.scene.gaussians import GaussianScene
 from ..images import write_png
 from ..progress import TerminalProgress
-from .args import positive_float, positive_int, render_options, scene_input, scene_options, up
+from .args import add_scene_command, positive_float, positive_int, scene_input, up
 
 BATCH = 4
 """Cameras rendered per rasterizer call: enough to amortise the per-call set-up, little memory."""
@@ -40,9 +40,10 @@ CAMERAS_FILE, DEPTH_RANGES_FILE = "cameras.json", "depth_ranges.json"
 
 def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``render`` subcommand."""
-    p = commands.add_parser(
+    p = add_scene_command(
+        commands,
+        debug,
         "render",
-        parents=[debug, scene_options(), render_options()],
         help="render a 3DGS .ply to PNGs",
         description="Render a scene to DIR/view_000.png, ... and write the cameras used to DIR/cameras.json. "
         "Without --cameras, N views on a ring fitted to the scene are generated.",

@@ -19,7 +19,7 @@ from ...core.scene.gaussians import GaussianScene
 from ...core.transfer.config import SETTINGS, TransferConfig
 from ..jobs import load_region, read_texture, run_transfer, summary, write_before_after
 from ..progress import TerminalProgress
-from .args import render_options, scene_input, scene_options
+from .args import add_scene_command, scene_input
 from .options import add_setting_arguments, config_from_args, in_range
 from .parts import part_region
 
@@ -154,9 +154,10 @@ def _transfer(args: argparse.Namespace) -> dict:
 
 def add_transfer_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``transfer`` subcommand."""
-    p = commands.add_parser(
+    p = add_scene_command(
+        commands,
+        debug,
         "transfer",
-        parents=[debug, scene_options(), render_options()],
         help="re-texture a 3DGS .ply with a texture photo (GT²-GS)",
         description="Re-texture SCENE.ply with TEXTURE so the texture follows the geometry from every view; "
         "writes the stylised scene to OUT.ply.",
