@@ -15,6 +15,28 @@ SPLAT_TRANSFORM = ROOT / "node_modules" / ".bin" / "splat-transform"
 DONUT = ROOT.parent / "shared" / "data" / "scenes" / "donut" / "point_cloud.ply"
 
 
+def core_names(k: int = 0) -> list[str]:
+    """INRIA order of the Gaussian properties for K f_rest coefficients per channel, written out by hand so
+    tests check the readers' and writers' tables against it."""
+    return [
+        "x",
+        "y",
+        "z",
+        "f_dc_0",
+        "f_dc_1",
+        "f_dc_2",
+        *(f"f_rest_{i}" for i in range(3 * k)),
+        "opacity",
+        "scale_0",
+        "scale_1",
+        "scale_2",
+        "rot_0",
+        "rot_1",
+        "rot_2",
+        "rot_3",
+    ]
+
+
 def splat_transform(*args: str | Path, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run splat-transform (``-w``: overwrite) on files; fails the test with its output when it fails."""
     if not SPLAT_TRANSFORM.is_file() or shutil.which("node") is None:

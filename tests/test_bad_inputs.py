@@ -45,8 +45,9 @@ from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture
 from gt2gs_blender.core.transfer.visibility import require_visible
 
+from .splat_tools import core_names
 from .test_cameras import COLMAP_CAMERAS, colmap_images, write_colmap_binary, write_colmap_text
-from .test_ply import MUTATION, core_names, mutate, random_columns, raw_ply
+from .test_ply import MUTATION, mutate, random_columns, raw_ply
 
 FUZZ = settings(
     deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture]

@@ -25,6 +25,8 @@ from gt2gs_blender.core.scene.ply import read_ply
 from gt2gs_blender.core.scene.ply_header import PlyProperty, read_ply_header
 from gt2gs_blender.core.scene.ply_write import write_ply
 
+from .splat_tools import core_names
+
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
 DONUT = SHARED / "data" / "scenes" / "donut" / "point_cloud.ply"
 needs_donut = pytest.mark.skipif(not DONUT.is_file(), reason=f"shared test data not found at {DONUT}")
@@ -50,27 +52,6 @@ TYPE_CODES = {
     "double": "f8",
     "float64": "f8",
 }
-
-
-def core_names(k: int = 0) -> list[str]:
-    """INRIA order of the Gaussian properties for K f_rest coefficients per channel."""
-    return [
-        "x",
-        "y",
-        "z",
-        "f_dc_0",
-        "f_dc_1",
-        "f_dc_2",
-        *(f"f_rest_{i}" for i in range(3 * k)),
-        "opacity",
-        "scale_0",
-        "scale_1",
-        "scale_2",
-        "rot_0",
-        "rot_1",
-        "rot_2",
-        "rot_3",
-    ]
 
 
 def random_columns(props: list[tuple[str, str]], n: int, seed: int = 0) -> dict[str, np.ndarray]:

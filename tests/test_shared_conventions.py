@@ -22,6 +22,8 @@ from gt2gs_blender.core.scene import inria
 from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
 
+from .splat_tools import core_names
+
 PACKAGE = Path(__file__).resolve().parents[1] / "gt2gs_blender"
 
 
@@ -58,22 +60,7 @@ def test_degenerate_zero_quaternion_is_the_identity():
 
 def test_inria_names_and_sh_layout():
     assert inria.SH_C0 == 0.28209479177387814
-    assert inria.REQUIRED == (
-        "x",
-        "y",
-        "z",
-        "f_dc_0",
-        "f_dc_1",
-        "f_dc_2",
-        "opacity",
-        "scale_0",
-        "scale_1",
-        "scale_2",
-        "rot_0",
-        "rot_1",
-        "rot_2",
-        "rot_3",
-    )
+    assert tuple(core_names(0)) == inria.REQUIRED
     names = inria.core_property_names(3)
     assert names[6:15] == [f"f_rest_{i}" for i in range(9)] and names[15] == "opacity"
     assert [inria.rest_per_channel(f"f_rest_{i}" for i in range(n)) for n in (0, 9, 24, 45)] == [0, 3, 8, 15]

@@ -23,6 +23,7 @@ from gt2gs_blender.blender import splats, transform
 from gt2gs_blender.core.scene.arrays import SplatArrays
 from gt2gs_blender.core.scene.ply_write import write_ply
 
+from ..splat_tools import core_names
 from .conftest import DONUT_COUNT
 
 pytestmark = pytest.mark.blender
@@ -87,24 +88,8 @@ def write_ply_numpy(path, props: list[tuple[str, str]], columns: dict[str, np.nd
 
 
 def core_props(k: int) -> list[tuple[str, str]]:
-    names = [
-        "x",
-        "y",
-        "z",
-        "f_dc_0",
-        "f_dc_1",
-        "f_dc_2",
-        *(f"f_rest_{i}" for i in range(3 * k)),
-        "opacity",
-        "scale_0",
-        "scale_1",
-        "scale_2",
-        "rot_0",
-        "rot_1",
-        "rot_2",
-        "rot_3",
-    ]
-    return [(name, "float") for name in names]
+    """The INRIA properties for K f_rest coefficients per channel, all float."""
+    return [(name, "float") for name in core_names(k)]
 
 
 EXTRAS = [
