@@ -700,11 +700,12 @@ def test_layout_images_show_the_bars_at_the_repeat_and_the_loss_ignores_uncovere
     covered = views.alphas[0] >= 0.9
     assert torch.equal(ideal[..., 3] > 0, covered)
     off = torch.where(covered[..., None], ideal[..., :3], torch.rand(96, 96, 3))
-    assert float(layout_loss(off, ideal)) == 0.0
-    assert float(layout_loss(ideal[..., :3] + 0.1, ideal)) == pytest.approx(0.1, rel=1e-4)
+    scene_colours = torch.rand(96, 96, 3)
+    assert float(layout_loss(off, ideal, scene_colours)) == 0.0
+    assert float(layout_loss(ideal[..., :3] + 0.1, ideal, ideal[..., :3])) == pytest.approx(0.1, rel=1e-4)
     black = ideal.clone()
     black[..., :3] = 0.0  # a black texture still counts on the surface
-    assert float(layout_loss(torch.full((96, 96, 3), 0.5), black)) == pytest.approx(0.5, rel=1e-6)
+    assert float(layout_loss(torch.full((96, 96, 3), 0.5), black, black[..., :3])) == pytest.approx(0.5, rel=1e-6)
 
 
 @pytest.mark.parametrize("split_first", [True, False])
@@ -797,13 +798,62 @@ def test_the_split_budget_bounds_the_saved_splats(shared, tmp_path, split_first)
 
 
 def test_layout_loss_charges_a_hue_more_than_the_same_step_in_light_and_dark():
-    """A grey step of d costs d, as a per-channel L1 charged it; a step of d in green alone costs
-    3 x 0.7152 d (luma and both colour differences move), so the texture term draws its dark lines dark
-    instead of buying them with one channel (the magenta dots at woven straw's crossings)."""
-    from gt2gs_blender.core.transfer.losses import LUMA, layout_loss
+    """Over a grey texture on a grey scene: a grey step of d costs d, as a per-channel L1 charged it; a step
+    of d in green alone costs 0.7152 d in luma and 4 x 2 x 0.7152 d in the colour differences, so the
+    texture term draws its dark lines dark instead of buying them with one channel (the magenta dots at
+    woven straw's crossings)."""
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
 
     ideal = torch.cat([torch.full((8, 8, 3), 0.5), torch.ones(8, 8, 1)], -1)
     darker = ideal[..., :3] - 0.2
     green_only = ideal[..., :3] - torch.tensor([0.0, 0.2, 0.0])
-    assert float(layout_loss(darker, ideal)) == pytest.approx(0.2, rel=1e-5)
-    assert float(layout_loss(green_only, ideal)) == pytest.approx(3 * LUMA[1] * 0.2, rel=1e-5)
+    assert float(layout_loss(darker, ideal, ideal[..., :3])) == pytest.approx(0.2, rel=1e-5)
+    expected = LUMA[1] * 0.2 * (1 + 2 * HUE_WEIGHT)
+    assert float(layout_loss(green_only, ideal, ideal[..., :3])) == pytest.approx(expected, rel=1e-5)
+
+
+def test_layout_loss_lets_a_hue_drift_back_to_the_scenes_own_for_free():
+    """A grey texture over a red scene: a result part of the way to the scene's hue, or at it, at the
+    texture's luma, costs nothing; one past it, or the same colour step toward blue, costs HUE_WEIGHT x the L1
+    distance of its colour differences (R - Y, B - Y) from the path's nearest point, worked out by hand."""
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
+
+    ideal = torch.cat([torch.full((4, 4, 3), 0.5), torch.ones(4, 4, 1)], -1)
+    luma = np.array(LUMA)
+
+    def at_luma(rgb: list[float]) -> torch.Tensor:
+        """The colour shifted in grey to the texture's luma 0.5, filling the image."""
+        colour = np.array(rgb) + 0.5 - np.array(rgb) @ luma
+        return torch.tensor(colour, dtype=torch.float32).expand(4, 4, 3)
+
+    red = at_luma([0.9, 0.5, 0.5])
+    path = 0.4 * np.array([1 - LUMA[0], -LUMA[0]])  # grey -> red in (R - Y, B - Y)
+    assert float(layout_loss(red, ideal, red)) == pytest.approx(0.0, abs=1e-6)
+    assert float(layout_loss(at_luma([0.7, 0.5, 0.5]), ideal, red)) == pytest.approx(0.0, abs=1e-6)
+    past = HUE_WEIGHT * np.abs(0.25 * path).sum()  # a quarter of the path again beyond the scene's hue
+    assert float(layout_loss(at_luma([1.0, 0.5, 0.5]), ideal, red)) == pytest.approx(past, rel=1e-4)
+    toward_blue = 0.4 * np.array([-LUMA[2], 1 - LUMA[2]])
+    nearest = np.clip(toward_blue @ path / (path @ path), 0.0, 1.0) * path
+    off = HUE_WEIGHT * np.abs(toward_blue - nearest).sum()
+    assert off > 0.4 and float(layout_loss(at_luma([0.5, 0.5, 0.9]), ideal, red)) == pytest.approx(off, rel=1e-4)
+
+
+def test_layout_loss_stays_finite_where_the_texture_and_the_scene_share_a_hue():
+    """Stress: the path of length zero (texture = scene), of a length under float32's smallest normal, and
+    a result exactly on the path: the loss and its gradient are finite, and a zero path costs the plain
+    distance from the texture's hue."""
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
+
+    g = torch.Generator().manual_seed(3)
+    texture = torch.rand(16, 16, 3, generator=g)
+    ideal = torch.cat([texture, torch.ones(16, 16, 1)], -1)
+    for scene in (texture, texture + 1e-39, texture * (1 + 1e-7)):
+        for start in (texture, torch.rand(16, 16, 3, generator=g)):
+            result = start.clone().requires_grad_(True)
+            loss = layout_loss(result, ideal, scene)
+            loss.backward()
+            assert torch.isfinite(loss) and torch.isfinite(result.grad).all()
+    red_step = texture + torch.tensor([0.1, 0.0, 0.0])
+    luma_part = 0.1 * LUMA[0]
+    chroma_part = 0.1 * (1 - LUMA[0]) + 0.1 * LUMA[0]
+    assert float(layout_loss(red_step, ideal, texture)) == pytest.approx(luma_part + HUE_WEIGHT * chroma_part, rel=1e-4)

@@ -61,19 +61,46 @@ def content_loss(feats: torch.Tensor, content_feats: torch.Tensor) -> torch.Tens
     return F.mse_loss(feats, content_feats)
 
 
-def layout_loss(image: torch.Tensor, layout: torch.Tensor) -> torch.Tensor:
+HUE_WEIGHT = 4.0
+"""How much more a step of hue off the path from the texture's to the scene's costs in the layout term than
+the same step in light and dark: a tint that neither the texture nor the capture has (the guitar's pink and
+green patches under woven straw, the fern's rainbow flecks under toy bricks) is bought 4x dearer."""
+
+
+def layout_loss(image: torch.Tensor, layout: torch.Tensor, scene: torch.Tensor) -> torch.Tensor:
     """Mean absolute difference between a render (H, W, 3) and the laid-out texture (H, W, 4: colour and
-    coverage), on the pixels the layout covers, in luma and the two colour differences (R - Y, B - Y): the
-    texture's structure, pixel for pixel (a black texel counts as much as any other). A step in light and
-    dark costs what it costs in RGB; a step in one channel costs 3-6x more, so the texture loss draws a
-    texture's dark gaps dark rather than buying them as dots of another hue (magenta at woven straw's
-    crossings, where a per-channel L1 charged a green-only step a third of a grey one)."""
+    coverage), on the pixels the layout covers: in luma, the texture's light and dark pixel for pixel (a
+    black texel counts as much as any other), and ``HUE_WEIGHT`` x how far the render's colour differences
+    (R - Y, B - Y) lie off the straight path from the texture's to the scene's (H, W, 3, the original
+    render) at that pixel: a spot may drift back toward the capture's own hue for free, while a hue that
+    neither has (magenta dots at woven straw's crossings, bought with one channel) costs far more than
+    the same step in light and dark."""
     covered = layout[..., 3] > 0
     if not bool(covered.any()):
         return image.sum() * 0.0
-    diff = (image - layout[..., :3])[covered]
-    luma = diff @ torch.tensor(LUMA, dtype=diff.dtype, device=diff.device)
-    return (luma.abs() + (diff[:, 0] - luma).abs() + (diff[:, 2] - luma).abs()).mean()
+    result, texture, original = image[covered], layout[..., :3][covered], scene[covered]
+    weights = torch.tensor(LUMA, dtype=image.dtype, device=image.device)
+    luma = (result - texture) @ weights
+    return (
+        luma.abs()
+        + HUE_WEIGHT * _off_path(_chroma(result, weights), _chroma(texture, weights), _chroma(original, weights))
+    ).mean()
+
+
+def _chroma(rgb: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """(N, 2) colour differences R - Y and B - Y of (N, 3) RGB: its hue and saturation apart from its light."""
+    luma = rgb @ weights
+    return torch.stack([rgb[:, 0] - luma, rgb[:, 2] - luma], -1)
+
+
+def _off_path(point: torch.Tensor, start: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
+    """(N,) L1 distance of each (N, 2) point from the nearest point of the segment start -> end (a segment of
+    length zero is its start)."""
+    step = end - start
+    length2 = (step * step).sum(-1)
+    along = ((point - start) * step).sum(-1) / length2.clamp_min(torch.finfo(point.dtype).tiny)
+    nearest = start + along.clamp(0.0, 1.0)[:, None] * step
+    return (point - nearest).abs().sum(-1)
 
 
 def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:

@@ -223,7 +223,7 @@ class Styliser:
             + cfg.lambda_tv * tv_loss(image[None])
         )
         if view.layout_image is not None:
-            loss = loss + cfg.lambda_layout * layout_loss(image, view.layout_image)
+            loss = loss + cfg.lambda_layout * layout_loss(image, view.layout_image, view.content_image)
         if self.report.moved_splats:
             loss = loss + cfg.lambda_scale * self._scale_term()
         loss.backward()
