@@ -847,10 +847,14 @@ def test_layout_loss_stays_finite_where_the_texture_and_the_scene_share_a_hue():
     g = torch.Generator().manual_seed(3)
     texture = torch.rand(16, 16, 3, generator=g)
     ideal = torch.cat([texture, torch.ones(16, 16, 1)], -1)
-    for scene in (texture, texture + 1e-39, texture * (1 + 1e-7)):
-        for start in (texture, torch.rand(16, 16, 3, generator=g)):
+    black = torch.cat([torch.zeros(16, 16, 3), torch.ones(16, 16, 1)], -1)
+    subnormal = torch.tensor([1e-39, 0.0, 0.0])  # a path whose squared length underflows to 0
+    assert float((subnormal * subnormal).sum()) == 0.0 and float(subnormal[0]) > 0.0
+    cases = [(ideal, texture), (ideal, texture * (1 + 1e-7)), (black, black[..., :3] + subnormal)]
+    for layout, scene in cases:
+        for start in (layout[..., :3], scene, torch.rand(16, 16, 3, generator=g)):
             result = start.clone().requires_grad_(True)
-            loss = layout_loss(result, ideal, scene)
+            loss = layout_loss(result, layout, scene)
             loss.backward()
             assert torch.isfinite(loss) and torch.isfinite(result.grad).all()
     red_step = texture + torch.tensor([0.1, 0.0, 0.0])
