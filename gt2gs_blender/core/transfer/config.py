@@ -27,6 +27,9 @@ from .speed import SpeedSettings
 
 MAX_DEPTH_RATIO = 2.0
 """Largest measured depth ratio the bank follows (the authors' fixed one): deeper scenes keep it, not a smudge."""
+SPLATS_PER_PIXEL = 4.0
+"""Splats behind each pixel of the object above which the run works at a larger size (up to Dense Upscale):
+denser than this, the run sets their colours only in blends and a capture's fine lines blur."""
 FORWARD_SPREAD_DEG = 45.0
 """Views all within this angle of their mean direction are a capture seen from the front (the Auto choices)."""
 PRUNE_SCREEN_RADIUS = 20.0
@@ -43,6 +46,16 @@ class TransferConfig(SpeedSettings):
     # -- views
     resolution: int = setting(
         256, "Resolution", "Longest side of the working views", "views", unit="px", min=16, soft_max=1024
+    )
+    dense_upscale: float = setting(
+        1.0,
+        "Dense Upscale",
+        f"A dense capture (more than {SPLATS_PER_PIXEL:g} splats behind each pixel of the object at Resolution) is "
+        "worked at up to this many times Resolution, so its fine lines and the texture's stay sharp; the run takes "
+        "longer (1: always at Resolution)",
+        "views",
+        min=1.0,
+        soft_max=4.0,
     )
     n_views: int = setting(
         16,

@@ -3,7 +3,8 @@
 :func:`plan_run` makes it from the scene, the texture, the views, the settings and the region. The run
 (``pipeline``), the orientation preview (CLI, API and Blender's worker) and the report read it, so
 nothing is derived twice and no setting is replaced mid-run. ``asked`` is the config as given; ``config``
-is the same with every automatic value resolved: the up axis of automatic views, the texture height
+is the same with every automatic value resolved: the up axis of automatic views, the working resolution (larger
+for a dense capture), the texture height
 ``texture_repeats`` implies, the layout's projection, whether the texture moves the splats, and the bank's depth
 ratio.
 """
@@ -30,12 +31,13 @@ from .grain import softened
 from .gt2 import view_order
 from .layout import LayoutFrame, layout_frame, projection, texture_height_for
 from .region import region_mask, stylise_start, visible_rows
+from .resolution import working_resolution
 from .skips import redundant_views
 from .stylise import moves_splats
 from .texture import load_texture
 from .views import ViewSet, fit_cameras
 
-RESOLVED = ("up", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
+RESOLVED = ("up", "resolution", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
 """The settings a plan resolves from the scene and its views (the report shows them beside what was asked)."""
 
 
@@ -101,7 +103,8 @@ def plan_run(
     up = config.up
     if up == "auto" and (views is None or isinstance(views, int)):
         up = axis_name(scene_up(framed)) or up
-    cameras = fit_cameras(framed, views, config.resolution, config.n_views, up)
+    resolution = working_resolution(framed, views, config, up)
+    cameras = fit_cameras(framed, views, resolution, config.n_views, up)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     start = stylise_start(original, selected, config.stylised_sh_degree)
     content = hidden = frame = None
@@ -114,7 +117,7 @@ def plan_run(
             # sized on every selected splat, hidden ones too
             frame = layout_frame(framed, content, config)
     used = None if content is None else content.subset([v for v in range(len(cameras)) if v not in dropped])
-    resolved = replace(_resolve(config, cameras, content, used, frame), up=up)
+    resolved = replace(_resolve(config, cameras, content, used, frame), up=up, resolution=resolution)
     return RunPlan(
         asked=config,
         config=resolved,

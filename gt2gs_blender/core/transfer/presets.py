@@ -57,6 +57,12 @@ top 3, from 1) at the same time (docs/quality.md); the paper's presets keep the 
 term's hue gradient passes a colour-gradient threshold more often than the texture loss alone, so these
 presets densify above 4e-4 (2e-4 grew the donut 26 % more splats and its run 20 % longer for no content)."""
 
+DENSE: dict[str, Any] = dict(dense_upscale=2.0)
+"""A dense capture worked at up to twice the preset's resolution in ``fast`` and ``balanced``: on the guitar (~14
+splats behind each pixel at 256 px, worked at 480) and the 500,000-splat robot (~36, at 512) the scene kept in
+held-out views rises by 0.027 at 2.1-2.6x the time, where the donut (3.4) keeps its size: forced to 512 px it lost
+content (docs/quality.md). ``preview`` stays small for a first look; the paper presets run at the paper's size."""
+
 PRESETS: dict[str, TransferConfig] = {
     "preview": TransferConfig(
         resolution=128,
@@ -72,9 +78,9 @@ PRESETS: dict[str, TransferConfig] = {
         split_first=False,  # a first look: refine the coarse splats, split at the end
         **LAYOUT,
     ),
-    "fast": TransferConfig(stylise_steps=300, correct_steps=150, n_angles=72, **LAYOUT),
+    "fast": TransferConfig(stylise_steps=300, correct_steps=150, n_angles=72, **LAYOUT, **DENSE),
     "balanced": TransferConfig(
-        resolution=384, n_views=24, stylise_steps=600, correct_steps=300, rounds=6, n_angles=72, **LAYOUT
+        resolution=384, n_views=24, stylise_steps=600, correct_steps=300, rounds=6, n_angles=72, **LAYOUT, **DENSE
     ),
     "paper-llff": TransferConfig(
         **PAPER,
