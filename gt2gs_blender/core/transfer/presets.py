@@ -60,7 +60,7 @@ presets densify above 4e-4 (2e-4 grew the donut 26 % more splats and its run 20 
 DENSE: dict[str, Any] = dict(dense_upscale=2.0)
 """A dense capture worked at up to twice the preset's resolution in ``fast`` and ``balanced``: on the guitar (~14
 splats behind each pixel at 256 px, worked at 480) and the 500,000-splat robot (~36, at 512) the scene kept in
-held-out views rises by 0.027 at 2.1-2.6x the time, where the donut (3.4) keeps its size: forced to 512 px it lost
+held-out views rises by 0.027 at about 2-2.8x the time, where the donut (3.4) keeps its size: forced to 512 px it lost
 content (docs/quality.md). ``preview`` stays small for a first look; the paper presets run at the paper's size."""
 
 PRESETS: dict[str, TransferConfig] = {
