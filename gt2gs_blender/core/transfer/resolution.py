@@ -52,14 +52,12 @@ def working_resolution(
 
 @torch.no_grad()
 def object_pixels(scene: GaussianScene, views: Sequence[Camera] | int | None, config: TransferConfig, up: str) -> float:
-    """Mean count of the pixels that show ``scene`` in a view at ``config.resolution``: its share of a few small
-    renders of the run's views, times the views' size."""
-    cameras = fit_cameras(scene, views, config.resolution, config.n_views, up)
+    """Mean count of the pixels that show ``scene`` in a view at ``config.resolution``: its pixels in a few small
+    renders of the run's views, scaled by the square of the sides' ratio."""
     probes = fit_cameras(scene, views, PROBE_SIDE, config.n_views, up)
     spread = probes[:: max(1, len(probes) // PROBE_VIEWS)][:PROBE_VIEWS]
-    share = sum(float((_alpha(scene, cam, config.backend) > OBJECT_ALPHA).float().mean()) for cam in spread)
-    size = sum(cam.width * cam.height for cam in cameras) / len(cameras)
-    return share / len(spread) * size
+    covered = sum(float((_alpha(scene, cam, config.backend) > OBJECT_ALPHA).float().sum()) for cam in spread)
+    return covered / len(spread) * (config.resolution / PROBE_SIDE) ** 2
 
 
 def _alpha(scene: GaussianScene, camera: Camera, backend: str) -> torch.Tensor:
