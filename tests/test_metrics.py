@@ -14,6 +14,7 @@ from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.weights import ResolvedWeights
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.train.ssim import ssim
 from gt2gs_blender.core.transfer import metrics
 
 from .conftest import SHARED
@@ -148,6 +149,11 @@ def test_fps_and_peak_memory():
     assert memory["rss_peak_mib"] > 10 and memory["cuda_peak_mib"] is None
 
 
+def paper_ssim(a: torch.Tensor, b: torch.Tensor) -> float:
+    """The paper's whole-frame SSIM, mean over views (the reference implementation's)."""
+    return float(ssim(a, b).mean())
+
+
 def _photo(seed: int, size: int = 64) -> torch.Tensor:
     """A smooth random (size, size, 3) image in [0, 1] with detail at several scales."""
     g = np.random.default_rng(seed)
@@ -159,7 +165,7 @@ def test_object_ssim_of_identical_renders_is_one_and_over_the_whole_frame_is_the
     a, b = _photo(0)[None], _photo(1)[None]
     everywhere = torch.ones(1, 64, 64, dtype=torch.bool)
     assert metrics.object_ssim(a, a, everywhere) == pytest.approx(1.0, abs=1e-6)
-    assert metrics.object_ssim(a, b, everywhere) == pytest.approx(metrics.content_ssim(a, b), abs=1e-6)
+    assert metrics.object_ssim(a, b, everywhere) == pytest.approx(paper_ssim(a, b), abs=1e-6)
     assert metrics.object_ssim(a, b, torch.zeros(1, 64, 64, dtype=torch.bool)) is None
 
 
@@ -173,7 +179,7 @@ def test_object_ssim_counts_only_the_objects_pixels():
     new_backdrop[0, :8] = 0.0
     new_object[0, 24:40, 24:40] = _photo(3, 16)
     assert metrics.object_ssim(new_backdrop, original, covered) == pytest.approx(1.0, abs=1e-6)
-    assert metrics.object_ssim(new_object, original, covered) < 0.5 < metrics.content_ssim(new_object, original)
+    assert metrics.object_ssim(new_object, original, covered) < 0.5 < paper_ssim(new_object, original)
 
 
 def test_the_blurred_object_ssim_is_the_ssim_of_opencv_blurred_renders():
@@ -185,8 +191,34 @@ def test_the_blurred_object_ssim_is_the_ssim_of_opencv_blurred_renders():
     blur = lambda x: torch.from_numpy(
         cv2.GaussianBlur(x.double().numpy(), (side, side), sigma, borderType=cv2.BORDER_REFLECT_101)
     ).float()
-    expected = metrics.content_ssim(blur(a)[None], blur(b)[None])
+    expected = paper_ssim(blur(a)[None], blur(b)[None])
     assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) == pytest.approx(expected, abs=1e-5)
     assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) > metrics.object_ssim(
         a[None], b[None], covered[None]
     )
+
+
+@pytest.mark.parametrize("sigma", [0.6, 3.0, 12.5])
+def test_the_blur_is_opencv_s_gaussian_blur_at_every_sigma(sigma):
+    """The blur by spectra against OpenCV's direct one (float64, mirrored edges), a wide sigma included, on a
+    batch of (H, W, C) images of a non-square size."""
+    images = torch.stack([_photo(6, 80)[:, :72], _photo(7, 80)[:, :72]])
+    side = 2 * int(np.ceil(3.0 * sigma)) + 1
+    expected = [
+        cv2.GaussianBlur(x.double().numpy(), (side, side), sigma, borderType=cv2.BORDER_REFLECT_101) for x in images
+    ]
+    got = metrics.gaussian_blur(images, sigma)
+    assert got.shape == images.shape and got.dtype == images.dtype
+    assert np.abs(got.numpy() - np.stack(expected)).max() < 1e-5
+
+
+def test_content_metrics_are_the_paper_s_ssim_and_the_object_s():
+    """One map per view serves both: the whole frame is the paper's SSIM, the object's pixels object_ssim."""
+    a, b = torch.stack([_photo(8), _photo(9)]), torch.stack([_photo(10), _photo(11)])
+    covered = torch.zeros(2, 64, 64, dtype=torch.bool)
+    covered[:, 10:50, 20:40] = True
+    got = metrics.content_metrics(a, b, covered)
+    assert got["ssim"] == pytest.approx(paper_ssim(a, b), abs=1e-6)
+    assert got["object_ssim"] == pytest.approx(metrics.object_ssim(a, b, covered), abs=1e-6)
+    assert got["object_ssim_blurred"] == pytest.approx(metrics.object_ssim(a, b, covered, blurred=True), abs=1e-6)
+    assert set(metrics.content_metrics(a, b)) == {"ssim"}

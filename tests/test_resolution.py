@@ -10,8 +10,11 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.camera import Camera
+from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.config import SPLATS_PER_PIXEL, TransferConfig
+from gt2gs_blender.core.transfer.metrics import COVERED, MEASURE_SIDE, content_metrics
+from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.plan import plan_run
 from gt2gs_blender.core.transfer.resolution import RESOLUTION_STEP, object_pixels, working_resolution
 
@@ -87,3 +90,37 @@ def test_the_plan_s_views_are_at_the_working_resolution_and_the_report_says_so()
     assert abs(size - expected(300**2, config)) <= RESOLUTION_STEP
     assert plan.resolved()["resolution"] == size
     assert [(c.width, c.height) for c in plan.cameras] == [(size, size)]
+
+
+def test_scene_kept_is_measured_at_one_size_whatever_size_the_run_worked_at(tmp_path) -> None:
+    """A dense card worked at 256 px and the same card asked for at 256 px are both judged at MEASURE_SIDE: the report's
+    content measures are those of the result and the original rendered independently at that size."""
+    base = dict(
+        stylise_steps=4,
+        correct_steps=0,
+        n_scales=2,
+        n_angles=4,
+        texture_height=64,
+        gpb=False,
+        densify=False,
+        evaluate=True,
+        device="cpu",
+        cache_dir=str(tmp_path),
+    )
+    scene = card(300)
+    stripes = np.zeros((64, 64, 3), dtype=np.float32)
+    stripes[:, ::8] = 1.0
+
+    def measured(result: GaussianScene, size: int) -> dict[str, float | None]:
+        cams = [c.scaled(size / SIDE) for c in camera()]
+        after = render(result, cams, background=(1.0, 1.0, 1.0), backend="torch")
+        before = render(scene, cams, background=(1.0, 1.0, 1.0), backend="torch")
+        return content_metrics(after.colors, before.colors, before.alphas > COVERED)
+
+    for config in (TransferConfig(resolution=SIDE, dense_upscale=2.0, **base), TransferConfig(resolution=256, **base)):
+        result = transfer(scene, stripes, camera(), config)
+        assert result.report["image_size"] == [256, 256]
+        reported, judged = result.report["metrics"], measured(result.scene, MEASURE_SIDE)
+        for name in ("ssim", "object_ssim", "object_ssim_blurred"):
+            assert reported[name] == pytest.approx(judged[name], abs=2e-3)
+        assert abs(judged["object_ssim"] - measured(result.scene, 256)["object_ssim"]) > 0.01

@@ -1,4 +1,5 @@
-"""The paper's evaluation metrics, measured on a run's own views (paper Tab. 1 and the cost table).
+"""The paper's evaluation metrics, measured on a run's own views (paper Tab. 1 and the cost table); the content
+measures at one size, ``MEASURE_SIDE``, whatever size the run worked at.
 
 - ``ssim``: the paper's content preservation, SSIM of each stylised render vs the original render over the
   whole frame, mean over views (a small object on a plain backdrop scores high whatever happens to it).
@@ -35,7 +36,7 @@ from ..features.extractor import FeatureExtractor
 from ..features.lpips import LPIPS
 from ..render import render
 from ..scene.gaussians import GaussianScene
-from ..train.ssim import WINDOW, gaussian_window, ssim, ssim_map
+from ..train.ssim import WINDOW, gaussian_window, ssim_map
 from .losses import LUMA, cosine_distance, nearest_features
 from .texture_bank import covered_cells
 
@@ -43,6 +44,10 @@ SHORT_RANGE = 1
 LONG_RANGE = 7
 COVERED = 0.5
 """Pixels the result covers at least this much count in ``preview_ssim``."""
+MEASURE_SIDE = 512
+"""Longest side of the views the content measures (``ssim``, ``object_ssim``, ``object_ssim_blurred``) judge a result
+at, whatever size the run worked at: about the size an object takes in a Blender viewport, and one size for every
+run, so two runs' numbers compare."""
 OBJECT_BLUR = 1.0 / 20.0
 """``object_ssim_blurred``'s Gaussian sigma, as a share of the object's size in the view (the square root of
 the pixels it covers): about 5 px for the donut at 256 px, wider than a texture's grain, narrower than a part."""
@@ -51,9 +56,23 @@ BLOCK_BYTES = 64 * 2**20
 
 
 @torch.no_grad()
-def content_ssim(stylised: torch.Tensor, original: torch.Tensor) -> float:
-    """Mean over views of SSIM(stylised render, original render), (V,H,W,3) each."""
-    return float(ssim(stylised, original).mean())
+def content_metrics(
+    stylised: torch.Tensor, original: torch.Tensor, covered: torch.Tensor | None = None
+) -> dict[str, float | None]:
+    """``{ssim}`` of stylised renders (V,H,W,3) against the original's, and ``object_ssim`` /
+    ``object_ssim_blurred`` over the ``covered`` (V,H,W) pixels of the original when given: one SSIM map per view
+    serves the whole frame and the object's pixels."""
+    frame, kept = [], []
+    for v, (image, reference) in enumerate(zip(stylised, original)):
+        per_window = ssim_map(image, reference)[0].mean(0)
+        frame.append(float(per_window.mean()))
+        if covered is not None:
+            kept.append(covered_mean(per_window, covered[v]))
+    out: dict[str, float | None] = {"ssim": _mean(frame)}
+    if covered is not None:
+        out["object_ssim"] = _mean([k for k in kept if k is not None])
+        out["object_ssim_blurred"] = object_ssim(stylised, original, covered, blurred=True)
+    return out
 
 
 @torch.no_grad()
@@ -67,24 +86,38 @@ def object_ssim(
     for image, reference, mask in zip(stylised, original, covered):
         if blurred and bool(mask.any()):
             sigma = OBJECT_BLUR * float(mask.sum()) ** 0.5
-            image, reference = gaussian_blur(image, sigma), gaussian_blur(reference, sigma)
+            image, reference = gaussian_blur(torch.stack([image, reference]), sigma)
         score = masked_ssim(image, reference, mask)
         if score is not None:
             scores.append(score)
     return _mean(scores)
 
 
-def gaussian_blur(image: torch.Tensor, sigma: float) -> torch.Tensor:
-    """(H, W, C) blurred by a Gaussian of ``sigma`` pixels (kernel 2 ceil(3 sigma) + 1, mirrored edges, as OpenCV)."""
-    radius = min(int(np.ceil(3.0 * sigma)), min(image.shape[:2]) - 1)
+def gaussian_blur(images: torch.Tensor, sigma: float) -> torch.Tensor:
+    """(..., H, W, C) blurred by a Gaussian of ``sigma`` pixels (kernel 2 ceil(3 sigma) + 1, mirrored edges, as
+    OpenCV), as a product of spectra: the object's-scale sigma grows with the views' size, and a direct
+    convolution's cost with it (2 s of a donut run's finish at 512 px)."""
+    radius = min(int(np.ceil(3.0 * sigma)), min(images.shape[-3:-1]) - 1)
     if sigma <= 0.0 or radius < 1:
-        return image
-    window = gaussian_window(2 * radius + 1, sigma, dtype=image.dtype, device=image.device)
-    x = F.pad(image.permute(2, 0, 1)[None], (radius, radius, radius, radius), mode="reflect")
-    channels = x.shape[1]
-    x = F.conv2d(x, window.reshape(1, 1, 1, -1).expand(channels, 1, 1, -1), groups=channels)
-    x = F.conv2d(x, window.reshape(1, 1, -1, 1).expand(channels, 1, -1, 1), groups=channels)
-    return x[0].permute(1, 2, 0)
+        return images
+    height, width = images.shape[-3:-1]
+    x = images.reshape(-1, height, width, images.shape[-1]).permute(0, 3, 1, 2)
+    x = F.pad(x, (radius, radius, radius, radius), mode="reflect")
+    rows, cols = x.shape[-2:]
+    window = gaussian_window(2 * radius + 1, sigma, dtype=torch.float64, device=x.device)
+    # a circular convolution of the padded image: exact on the centre, where the window never wraps
+    data = torch.fft.rfft2(x)
+    kernel = torch.fft.fft(_centred(window, rows))[:, None] * torch.fft.rfft(_centred(window, cols))[None, :]
+    y = torch.fft.irfft2(data * kernel.to(data.dtype), s=(rows, cols))
+    y = y[..., radius : radius + height, radius : radius + width]
+    return y.permute(0, 2, 3, 1).reshape(images.shape)
+
+
+def _centred(window: torch.Tensor, size: int) -> torch.Tensor:
+    """``window`` (2r+1,) in a ring of ``size`` with its centre at index 0 (the kernel of a circular convolution)."""
+    ring = torch.zeros(size, dtype=window.dtype, device=window.device)
+    ring[: len(window)] = window
+    return torch.roll(ring, -(len(window) // 2))
 
 
 @torch.no_grad()
@@ -104,7 +137,11 @@ def preview_ssim(
 def masked_ssim(image: torch.Tensor, reference: torch.Tensor, covered: torch.Tensor) -> float | None:
     """Mean SSIM of two (H, W, C) images over the windows centred on ``covered`` (H, W) pixels: an object's
     likeness without the background around it; None when no window is centred on a covered pixel."""
-    per_window = ssim_map(image, reference)[0].mean(0)
+    return covered_mean(ssim_map(image, reference)[0].mean(0), covered)
+
+
+def covered_mean(per_window: torch.Tensor, covered: torch.Tensor) -> float | None:
+    """Mean of an SSIM map (H-10, W-10) over the windows centred on ``covered`` (H, W) pixels; None when none is."""
     half = WINDOW // 2
     inside = covered[half:-half, half:-half].to(per_window.device)
     return float(per_window[inside].mean()) if bool(inside.any()) else None
@@ -206,17 +243,16 @@ def evaluate(
     extractor: FeatureExtractor | None = None,
     bank_features: torch.Tensor | None = None,
     covered: torch.Tensor | None = None,
+    content_views: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
 ) -> dict[str, float | None]:
     """``{ssim, st_rmse, st_lpips, lt_rmse, lt_lpips, texture_match}`` of stylised renders (V,H,W,3), and
     ``object_ssim`` / ``object_ssim_blurred`` over the ``covered`` (V,H,W) pixels of the original when given.
 
     ``depths``/``alphas`` are the stylised renders' raw depth and alpha; texture_match needs the
-    feature ``extractor`` and the texture bank's features (M,C), else it is None.
+    feature ``extractor`` and the texture bank's features (M,C), else it is None. ``content_views`` (stylised,
+    original, covered), when given, are the renders the content measures read instead (another size of the views).
     """
-    out: dict[str, float | None] = {"ssim": content_ssim(stylised, original)}
-    if covered is not None:
-        out["object_ssim"] = object_ssim(stylised, original, covered)
-        out["object_ssim_blurred"] = object_ssim(stylised, original, covered, blurred=True)
+    out = content_metrics(*(content_views or (stylised, original, covered)))
     for prefix, offset in (("st", SHORT_RANGE), ("lt", LONG_RANGE)):
         scores = consistency(stylised, depths, alphas, cameras, offset, lpips=lpips)
         out[f"{prefix}_rmse"], out[f"{prefix}_lpips"] = scores["rmse"], scores["lpips"]
