@@ -14,6 +14,7 @@ from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.config import SPLATS_PER_PIXEL, TransferConfig
 from gt2gs_blender.core.transfer.metrics import COVERED, MEASURE_SIDE, content_metrics
+from gt2gs_blender.core.transfer.orientation_preview import preview
 from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.plan import plan_run
 from gt2gs_blender.core.transfer.resolution import RESOLUTION_STEP, object_pixels, working_resolution
@@ -124,3 +125,13 @@ def test_scene_kept_is_measured_at_one_size_whatever_size_the_run_worked_at(tmp_
         for name in ("ssim", "object_ssim", "object_ssim_blurred"):
             assert reported[name] == pytest.approx(judged[name], abs=2e-3)
         assert abs(judged["object_ssim"] - measured(result.scene, 256)["object_ssim"]) > 0.01
+
+
+def test_the_preview_says_the_size_the_run_works_at() -> None:
+    """The orientation preview reports the run's views: a dense card asked at 128 px is worked at 256, a sparse one
+    at 128 (Blender shows it before the run)."""
+    texture = np.full((8, 8, 3), 0.5, dtype=np.float32)
+    config = TransferConfig(resolution=SIDE, dense_upscale=2.0, layout=False, device="cpu")
+    for per_side, side in ((300, 256), (20, SIDE)):
+        shown = preview(card(per_side), texture, camera(), config, size=64)
+        assert (shown.views, shown.size) == (1, (side, side))

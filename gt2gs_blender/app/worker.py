@@ -15,8 +15,9 @@ are a caller's temporary exports (default: the file paths).
 Events go to stdout as JSON lines (stray prints of libraries are sent to stderr instead):
 ``{"event": "progress", "stage", "step", "total", "fraction", "eta_s", "message", "preview"}`` (the
 preview is the path of a PNG frame, written atomically, or null), then exactly one of
-``{"event": "done", "output", "report"}`` (a preview adds ``"splats"``, what the run will start from, and
-``"scene_splats"``, the input's), ``{"event": "cancelled"}`` or
+``{"event": "done", "output", "report"}`` (a preview adds ``"splats"``, what the run will start from,
+``"scene_splats"``, the input's, ``"views"``, the run's [count, width, height], and ``"resolution"``, the
+*Resolution* asked for: a dense capture is worked larger), ``{"event": "cancelled"}`` or
 ``{"event": "error", "message"}``. Exit status: 0 done, 1 internal error, 2 unusable input,
 3 cancelled (a cancel file appeared or SIGTERM arrived), 4 out of memory (an allocation failed; the
 message says what to lower). Outputs are written atomically and only on success, so a cancelled or
@@ -177,7 +178,15 @@ def run_preview(spec: JobSpec, events: Events, cancel: Callable[[], bool]) -> No
     _prepare_kernel(config, lambda p: _send(events, p), cancel)
     shown = preview(scene, read_texture(spec.texture), _views(spec), config, size=spec.preview_size, region=region)
     write_png(spec.output, shown.image)
-    events(Event.DONE, output=str(spec.output), report=None, splats=shown.splats, scene_splats=len(scene))
+    events(
+        Event.DONE,
+        output=str(spec.output),
+        report=None,
+        splats=shown.splats,
+        scene_splats=len(scene),
+        views=[shown.views, *shown.size],
+        resolution=config.resolution,
+    )
 
 
 def run(job_file: str | os.PathLike, events: Events) -> int:

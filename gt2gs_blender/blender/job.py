@@ -62,6 +62,8 @@ class JobStatus:
     error: str | None = None
     splats: tuple[int, int] | None = None
     """A preview's splat counts: what the run will start from, and the input's."""
+    views: tuple[int, int, int, int] | None = None
+    """A preview's run views: count, width, height, and the *Resolution* asked for (a dense capture: larger)."""
 
     @property
     def finished(self) -> bool:
@@ -181,6 +183,8 @@ class Job:
             status.output = event.get("output")
             if event.get("splats") and event.get("scene_splats"):
                 status.splats = int(event["splats"]), int(event["scene_splats"])
+            if event.get("views") and event.get("resolution"):
+                status.views = (*(int(v) for v in event["views"]), int(event["resolution"]))
             report = event.get("report")
             if report and os.path.isfile(report):
                 with open(report, encoding="utf-8") as f:

@@ -251,9 +251,15 @@ def selected_points(obj) -> np.ndarray:
     return indices
 
 
-def show_preview(path: str, first_view: str, splats: tuple[int, int] | None = None) -> None:
+def show_preview(
+    path: str,
+    first_view: str,
+    splats: tuple[int, int] | None = None,
+    views: tuple[int, int, int, int] | None = None,
+) -> None:
     """Load a PNG frame of ``first_view`` into the panel's preview image (an ImagePreview, not a datablock of
-    the file); ``splats``: the finished preview's counts (the run's start, the object's)."""
+    the file); ``splats``: the finished preview's counts (the run's start, the object's); ``views``: the run's
+    (count, width, height, Resolution asked for)."""
     image = bpy.data.images.load(path, check_existing=False)
     try:
         width, height = image.size
@@ -269,6 +275,7 @@ def show_preview(path: str, first_view: str, splats: tuple[int, int] | None = No
     preview.image_pixels_float.foreach_set(pixels)
     _previews["first_view"] = first_view
     _previews["splats"] = splats
+    _previews["views"] = views
 
 
 def preview_icon() -> int:
@@ -295,11 +302,22 @@ def preview_splats_text() -> str:
     return f"The result will have about {start:,} splats, {start / scene:.1f}x the object's {scene:,}"
 
 
+def preview_views_text() -> str:
+    """The views the previewed run will work at, and why when larger than *Resolution*, or "" when unknown."""
+    views = _previews.get("views")
+    if not views:
+        return ""
+    count, width, height, asked = views
+    text = f"The run works {count} views at {width}×{height}"
+    return text if max(width, height) <= asked else f"{text}: a dense capture, above Resolution's {asked}"
+
+
 def release_previews() -> None:
     """Free the preview images (at unregister)."""
     collection = _previews.pop("collection", None)
     _previews.pop("first_view", None)
     _previews.pop("splats", None)
+    _previews.pop("views", None)
     if collection is not None:
         bpy.utils.previews.remove(collection)
 
@@ -374,7 +392,7 @@ class TransferRun:
             show_preview(status.preview, self.first_view)
             self.shown_preview = status.preview
         if status.state == DONE and self.kind == "preview" and self.shown_preview != status.output:
-            show_preview(status.output, self.first_view, status.splats)
+            show_preview(status.output, self.first_view, status.splats, status.views)
             self.shown_preview = status.output
         if status.state == DONE and self.kind == "transfer" and self.result_name is None:
             try:

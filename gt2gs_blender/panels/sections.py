@@ -162,6 +162,9 @@ def _draw_texture_front(layout, context) -> None:
         splats = transfer_run.preview_splats_text()
         if splats:
             layout.label(text=splats, icon="POINTCLOUD_DATA")
+        views = transfer_run.preview_views_text()
+        if views:
+            text_lines(layout, views, icon="VIEW_CAMERA")
 
 
 def _draw_views_front(layout, context) -> None:

@@ -758,6 +758,12 @@ def test_orientation_preview_names_the_first_view_and_the_result_s_size(blob):
     start, ratio, count = int(found[1].replace(",", "")), float(found[2]), int(found[3].replace(",", ""))
     assert count == len(blob.data.points) < start <= bpy.context.scene.gt2gs.split_budget * count
     assert ratio == pytest.approx(start / count, abs=0.05)
+    assert transfer_run.preview_views_text() == "The run works 2 views at 48×48"
+    settings = bpy.context.scene.gt2gs
+    settings.resolution, settings.dense_upscale = 16, 2.0  # 600 splats on ~80 px: 7.5 behind each, dense
+    assert bpy.ops.gt2gs.preview_orientation(n_views=2) == {"FINISHED"}
+    assert transfer_run.preview_views_text() == "The run works 2 views at 32×32: a dense capture, above Resolution's 16"
+    settings.resolution, settings.dense_upscale = 48, 1.0
     selection = blob.data.attributes.new(transfer_run.SELECTION_ATTRIBUTE, "BOOLEAN", "POINT")
     selection.data.foreach_set("value", np.arange(count) % 3 == 0)
     bpy.context.scene.gt2gs.region_only = True  # the preview splits only the selected third, as the run will

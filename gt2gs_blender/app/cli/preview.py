@@ -44,4 +44,8 @@ def cmd_preview(args: argparse.Namespace) -> None:
     shown = preview(run.scene, run.texture, run.views, run.config, size=args.size, region=run.region)
     with all_or_nothing([args.output]):
         write_png(args.output, shown.image)
-    print(f"preview: {args.output} (the run's first view; it will start from {shown.splats:,} splats)")
+    width, height = shown.size
+    print(
+        f"preview: {args.output} (the run's first view; it will start from {shown.splats:,} splats "
+        f"and work {shown.views} views at {width}x{height})"
+    )

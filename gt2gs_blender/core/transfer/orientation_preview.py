@@ -113,6 +113,10 @@ class Preview:
     splats: int
     """How many splats the run starts its optimisation from (after the layout's detail split): what the saved
     file will hold, give or take densification."""
+    views: int
+    """How many views the run optimises over."""
+    size: tuple[int, int]
+    """The run's views' width and height: larger than *Resolution* for a dense capture (``working_resolution``)."""
 
 
 @torch.no_grad()
@@ -135,12 +139,14 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
     the run starts (split to its detail, without the optimisation's changes); else the screen-space sketch
     at the texture size and depth ratio the run uses."""
     config, first = plan.config, plan.cameras[0]
+    views = (len(plan.cameras), (first.width, first.height))
     if config.layout:
         laid = laid_out_start(plan)
         cam = first.scaled(size / max(first.width, first.height))
         out = render(laid, [cam], background=plan.background, backend=config.backend)
-        return Preview((out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8), len(laid))
-    return Preview(sketch(plan, first, size), len(plan.original))
+        image = (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
+        return Preview(image, len(laid), *views)
+    return Preview(sketch(plan, first, size), len(plan.original), *views)
 
 
 def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:
