@@ -30,7 +30,7 @@ from .config import TransferConfig, keeps_scene
 from .content import content_degree
 from .detail import add_detail, split_for_detail
 from .layout import lay_out, layout_images, layout_shading, shade_width
-from .metrics import COVERED, MEASURE_SIDE, preview_ssim
+from .metrics import COVERED, MEASURE_SIDE, MEASURE_STRIDE, preview_ssim
 from .orientation_preview import show
 from .plan import RunPlan, plan_run
 from .region import assemble, structure_changed
@@ -274,9 +274,9 @@ def _evaluate(
     extractor: FeatureExtractor,
     config: TransferConfig,
 ) -> dict:
-    """The paper's metrics on the run's views (the content measures at ``MEASURE_SIDE``), and texture match
-    of the colour-transferred start (the content images of the used views, over the background as the result is
-    measured)."""
+    """The paper's metrics on the run's views (the content measures on every other one at ``MEASURE_SIDE``), and
+    texture match of the colour-transferred start (the content images of the used views, over the background as the
+    result is measured)."""
     from ..features.lpips import load_lpips
     from .metrics import covered_features, evaluate, texture_match
 
@@ -311,15 +311,13 @@ def _evaluate(
 
 def _measured_views(
     result: GaussianScene, plan: RunPlan, config: TransferConfig
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None:
-    """The result's and the original's renders and the original's covered pixels from the run's views at
-    ``MEASURE_SIDE``, what the content measures read (None: the run's own renders are at that size). SSIM's window
-    spans less of the object at a larger size and a run's splats are shaped for its own, so content measured at each
-    run's working size would not compare across Resolution, presets and Dense Upscale (the guitar read 0.745 at 480
-    px against 0.784 at 256, while held-out views at 512 px said the 480 px run kept more: 0.791 against 0.749)."""
-    if max(plan.cameras[0].width, plan.cameras[0].height) == MEASURE_SIDE:
-        return None
-    cameras = fit_cameras(plan.original, plan.cameras, MEASURE_SIDE, config.n_views)
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The result's and the original's renders and the original's covered pixels from every ``MEASURE_STRIDE``-th
+    of the run's views at ``MEASURE_SIDE``: what the content measures read. SSIM's window spans less of the object at
+    a larger size and a run's splats are shaped for its own, so content measured at each run's working size would not
+    compare across Resolution, presets and Dense Upscale (the guitar read 0.745 at 480 px against 0.784 at 256, while
+    held-out views at 512 px said the 480 px run kept more: 0.791 against 0.749)."""
+    cameras = fit_cameras(plan.original, plan.cameras[::MEASURE_STRIDE], MEASURE_SIDE, config.n_views)
     degree = content_degree(plan.original, config)
     original = render_views(plan.original, cameras, plan.background, config.backend, degree)
     stylised = render_views(result, cameras, plan.background, config.backend)
