@@ -338,15 +338,24 @@ def test_the_preview_skips_the_splats_the_run_skips(shared, tmp_path):
     assert np.abs(shown.image.astype(np.float32) - expected).max() <= 1.0
 
 
-def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path):
-    """A run with no steps is its preview (preview_ssim ~1); a flat grey picture of the same view is not."""
+@pytest.mark.parametrize("split_first", [True, False])
+def test_the_report_says_how_close_the_result_is_to_its_preview(shared, tmp_path, split_first):
+    """A run with no steps is its preview (preview_ssim ~1), whether the run keeps its own laid-out start's view
+    (split first) or lays the preview out again (split at the end); a flat grey picture of the same view is not."""
     from gt2gs_blender.core.api import transfer
     from gt2gs_blender.core.transfer.metrics import preview_ssim
 
     scene, cam = wall(n=80, tilt_deg=20.0), front_camera(96)
     texture = stripes(period=32, size=128)
     config = wall_config(
-        shared, tmp_path, stylise_steps=0, correct_steps=0, texture_repeats=3.0, evaluate=True, color_transfer=False
+        shared,
+        tmp_path,
+        stylise_steps=0,
+        correct_steps=0,
+        texture_repeats=3.0,
+        evaluate=True,
+        color_transfer=False,
+        split_first=split_first,
     )
     result = transfer(scene, texture, [cam], config)
     assert result.report["metrics"]["preview_ssim"] >= 0.99

@@ -142,11 +142,17 @@ def show(plan: RunPlan, *, size: int = 256) -> Preview:
     views = (len(plan.cameras), (first.width, first.height))
     if config.layout:
         laid = laid_out_start(plan)
-        cam = first.scaled(size / max(first.width, first.height))
-        out = render(laid, [cam], background=plan.background, backend=config.backend)
-        image = (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
-        return Preview(image, len(laid), *views)
+        return Preview(first_view(plan, laid, size), len(laid), *views)
     return Preview(sketch(plan, first, size), len(plan.original), *views)
+
+
+@torch.no_grad()
+def first_view(plan: RunPlan, scene: GaussianScene, size: int) -> np.ndarray:
+    """(H, W, 3) uint8: ``scene`` from ``plan``'s first view at longest side ``size``, over the run's background."""
+    first = plan.cameras[0]
+    cam = first.scaled(size / max(first.width, first.height))
+    out = render(scene, [cam], background=plan.background, backend=plan.config.backend)
+    return (out.colors[0].clamp(0.0, 1.0).cpu().numpy() * 255.0 + 0.5).astype(np.uint8)
 
 
 def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:

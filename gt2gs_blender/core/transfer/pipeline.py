@@ -31,7 +31,7 @@ from .content import content_degree
 from .detail import add_detail, split_for_detail
 from .layout import lay_out, layout_images, layout_shading, shade_width
 from .metrics import COVERED, MEASURE_SIDE, MEASURE_STRIDE, preview_ssim
-from .orientation_preview import show
+from .orientation_preview import first_view, show
 from .plan import RunPlan, plan_run
 from .region import assemble, structure_changed
 from .shade import laid_exposure
@@ -185,11 +185,15 @@ def _transfer(
         autocast=mixed_precision_dtype(plan.device, config.mixed_precision),
     )
     n_work = len(work)
-    laid_out = None
+    laid_out = start_view = None
     if frame is not None and config.layout:
         if config.split_first and config.split_size > 0:
             work, region, shade = split_for_detail(work, region, shade, frame, config)
         work = lay_out(work, region, plan.content, image, frame, config, shade)
+        if config.evaluate and (config.split_first or config.split_size <= 0):
+            # the run's start as the orientation preview shows it, kept for preview_ssim (no second layout)
+            start = assemble(work, region, plan.start, plan.selected, plan.hidden, changed=True)
+            start_view = first_view(plan, start, _side(plan.cameras[0]))
         projected, split = config.layout_projection, len(work) - n_work
         exposure = 1.0 if shade is None else laid_exposure(shade, region)
         laid_out = {
@@ -242,7 +246,7 @@ def _transfer(
     metrics = None
     if config.evaluate and labelled is not None:  # always built when evaluating
         metrics = _evaluate(work, plan, targets, labelled, extractor, config)
-        shown = show(plan, size=max(plan.cameras[0].width, plan.cameras[0].height)).image
+        shown = start_view if start_view is not None else show(plan, size=_side(plan.cameras[0])).image
         metrics["preview_ssim"] = preview_ssim(work, shown, plan.cameras[0], plan.background, config.backend)
     tracker.end()
     report = _report(plan, tracker, work, extractor, bank, metrics)
@@ -327,6 +331,11 @@ def _measured_views(
         torch.stack([original.composited(v) for v in views]),
         torch.stack(original.alphas) > COVERED,
     )
+
+
+def _side(camera: Camera) -> int:
+    """A view's longest side, in pixels."""
+    return max(camera.width, camera.height)
 
 
 def _weights_folder(path: str | None) -> str | None:
