@@ -302,7 +302,6 @@ def _evaluate(
         lpips=lpips,
         extractor=extractor,
         bank_features=bank.features,
-        covered=torch.stack(content.alphas) > COVERED,
         content_views=_measured_views(result, plan, config),
     )
     # the metric's own covered cells and background (as for the result), whatever the texture loss used
