@@ -116,14 +116,15 @@ def test_evaluate_assembles_every_metric(lpips):
     out = render(scene, cameras, backend="torch")
     extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
     bank = extractor(out.colors[:1].permute(0, 3, 1, 2)).permute(0, 2, 3, 1).reshape(-1, extractor.spec.out_channels)
+    both = (out.colors, out.colors, None)
     result = metrics.evaluate(
-        out.colors, out.colors, out.depths, out.alphas, cameras, lpips=lpips, extractor=extractor, bank_features=bank
+        out.colors, out.depths, out.alphas, cameras, both, lpips=lpips, extractor=extractor, bank_features=bank
     )
     assert set(result) == {"ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match"}
     assert result["ssim"] == pytest.approx(1.0, abs=1e-5)
     assert result["st_rmse"] < result["lt_rmse"] < 0.05 and result["st_lpips"] is not None
     assert 0.0 <= result["texture_match"] < 0.5
-    assert metrics.evaluate(out.colors, out.colors, out.depths, out.alphas, cameras)["texture_match"] is None
+    assert metrics.evaluate(out.colors, out.depths, out.alphas, cameras, both)["texture_match"] is None
 
 
 def test_texture_match_counts_only_covered_cells():
@@ -135,7 +136,13 @@ def test_texture_match_counts_only_covered_cells():
     extractor = FeatureExtractor(VGG19_NORM_RELU3, ResolvedWeights(VGG19_NORM_RELU3, None, None, "test"))
     bank = torch.randn(50, extractor.spec.out_channels, generator=torch.Generator().manual_seed(2))
     result = metrics.evaluate(
-        out.colors, out.colors, out.depths, alphas, cameras[:2], extractor=extractor, bank_features=bank
+        out.colors,
+        out.depths,
+        alphas,
+        cameras[:2],
+        (out.colors, out.colors, None),
+        extractor=extractor,
+        bank_features=bank,
     )
     feats = extractor(out.colors.permute(0, 3, 1, 2))
     half = feats.shape[-1] // 2

@@ -237,25 +237,23 @@ def peak_memory_mib(device: torch.device | str = "cpu") -> dict[str, float | Non
 @torch.no_grad()
 def evaluate(
     stylised: torch.Tensor,
-    original: torch.Tensor,
     depths: torch.Tensor,
     alphas: torch.Tensor,
     cameras: Sequence[Camera],
+    content: tuple[torch.Tensor, torch.Tensor, torch.Tensor | None],
     *,
     lpips: LPIPS | None = None,
     extractor: FeatureExtractor | None = None,
     bank_features: torch.Tensor | None = None,
-    covered: torch.Tensor | None = None,
-    content_views: tuple[torch.Tensor, torch.Tensor, torch.Tensor] | None = None,
 ) -> dict[str, float | None]:
-    """``{ssim, st_rmse, st_lpips, lt_rmse, lt_lpips, texture_match}`` of stylised renders (V,H,W,3), and
-    ``object_ssim`` / ``object_ssim_blurred`` over the ``covered`` (V,H,W) pixels of the original when given.
+    """``{st_rmse, st_lpips, lt_rmse, lt_lpips, texture_match}`` of stylised renders (V,H,W,3) and the content
+    measures (:func:`content_metrics`) of ``content``: (stylised, original, covered or None) renders, which may be
+    other views or another size than the stylised ones (a run's are every other view at ``MEASURE_SIDE``).
 
     ``depths``/``alphas`` are the stylised renders' raw depth and alpha; texture_match needs the
-    feature ``extractor`` and the texture bank's features (M,C), else it is None. ``content_views`` (stylised,
-    original, covered), when given, are the renders the content measures read instead (another size of the views).
+    feature ``extractor`` and the texture bank's features (M,C), else it is None.
     """
-    out = content_metrics(*(content_views or (stylised, original, covered)))
+    out = content_metrics(*content)
     for prefix, offset in (("st", SHORT_RANGE), ("lt", LONG_RANGE)):
         scores = consistency(stylised, depths, alphas, cameras, offset, lpips=lpips)
         out[f"{prefix}_rmse"], out[f"{prefix}_lpips"] = scores["rmse"], scores["lpips"]

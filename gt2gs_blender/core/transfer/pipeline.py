@@ -292,17 +292,15 @@ def _evaluate(
     except GT2GSError:
         lpips = None  # LPIPS weights not found: the lpips fields are reported as None
     images = torch.stack([stylised.composited(v) for v in range(len(cams))])
-    originals = torch.stack([content.composited(v) for v in range(len(cams))])
     metrics = evaluate(
         images,
-        originals,
         torch.stack(stylised.depths),
         torch.stack(stylised.alphas),
         cams,
+        _measured_views(result, plan, config),
         lpips=lpips,
         extractor=extractor,
         bank_features=bank.features,
-        content_views=_measured_views(result, plan, config),
     )
     # the metric's own covered cells and background (as for the result), whatever the texture loss used
     start_features = torch.cat(
