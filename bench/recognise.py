@@ -14,8 +14,11 @@ the scene kept, projected onto the object in screen space (``projected``: textur
 at the preset's resolution) must rank near the top, and the original untransferred scene must not (the null
 case). With ``layout`` on, a ``layout-start`` row too: the scene with the texture laid out exactly as the run
 starts from it (before any optimisation), rendered from the held-out views (with several presets,
-``<preset>-layout-start``), and a ``layout-surface`` row: that layout on an exact surface, no splats
-(``layout_surface``): the layout free of the splats' blur (a run's texture loss can still draw its lines sharper).
+``<preset>-layout-start``), a ``layout-target`` row: that layout on an exact surface, no splats, over the scene as
+the run keeps it (``layout_surface(shaded=True)``: the images the run's layout term holds its views to, free of the
+splats' blur), and a ``layout-surface`` row: the texture alone on that surface, nothing of the scene kept. Between
+them they say where a texture is lost: to the scene the run keeps (surface -> target), to the splats (target ->
+start), or by the optimisation (start -> result; a run's texture loss can also draw the lines sharper).
 
 From the preview: every result's held-out renders are compared image to image with the preview of the same
 views (``recognise_measure.pair_distance``: window by window, both measures, no scale or rotation search),
@@ -25,13 +28,13 @@ promised). The preview is the layout start when ``layout`` is on, else the scree
 shows (``orientation_preview.sketch``: its texture size, depth groups and kept scene; a ``sketch`` row);
 ``preview_reference`` names it.
 
-Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its
-held-out views to the original scene's, on the object's pixels: how much of the user's scene still shows under
-the texture (the structure measures reward the texture alone; this is the other side of the trade). The
-original row is 1 by definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade) and
-cover every pixel the measure counts. ``colour_specks`` ("specks") is the share of the object's pixels whose hue
-stands out from their neighbourhood: colour noise a run adds (the original row holds the scene's own: sprinkles,
-flowers).
+Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its held-out
+views to the original scene's, on the object's pixels: how much of the user's scene still shows under the texture
+(the structure measures reward the texture alone; this is the other side of the trade). The original row is 1 by
+definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade), and they and
+``layout-target`` rows cover every pixel the measure counts. ``colour_specks`` ("specks") is the share of the
+object's pixels whose hue stands out from their neighbourhood: colour noise a run adds (the original row holds the
+scene's own: sprinkles, flowers).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -339,12 +342,12 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             pictures.mkdir(parents=True, exist_ok=True)
             for k, (rgb, _) in enumerate(views):
                 cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
-            surface = variant.removesuffix("-start") + "-surface"
-            views = layout_surface(run, bench, texture_path(texture))
-            p = row(name, texture, surface, score(view_stats(views), stats))
-            p.update(scene_side(views, original_views))
-            rows.append(p)
-            sheet[texture].append(tile(views[0][0], ranks_label(p, "surface")))
+            for kind, shaded in (("target", True), ("surface", False)):
+                views = layout_surface(run, bench, texture_path(texture), shaded)
+                p = row(name, texture, variant.removesuffix("-start") + f"-{kind}", score(view_stats(views), stats))
+                p.update(scene_side(views, original_views))
+                rows.append(p)
+                sheet[texture].append(tile(views[0][0], ranks_label(p, kind)))
         first = references[args.presets[0]]
         r.update(preview_fields(from_preview(original_stats, previews[first]), first, starts[args.presets[0]]))
         rows.append(r)
@@ -458,7 +461,9 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
 
 
 def is_transfer(variant: str) -> bool:
-    calibration = variant.startswith("projected") or variant.endswith(("sketch", "layout-start", "layout-surface"))
+    calibration = variant.startswith("projected") or variant.endswith(
+        ("sketch", "layout-start", "layout-target", "layout-surface")
+    )
     return variant != "original" and not calibration
 
 

@@ -11,7 +11,7 @@ CC-BY-4.0) are seen as the donut is, about their own up axis.
 ``run_start``/``layout_start``: what a run on a scene starts from, from the engine's own pieces (the pipeline's
 prepare stage): the layout's frame from the run's views, and the scene with the texture laid out before any
 optimisation step, to render from the held-out views. ``layout_surface``: the same layout on an exact surface
-(no splats): the layout free of the splats' blur.
+(no splats): the layout free of the splats' blur, alone or over the scene the run keeps (the run's own target).
 """
 
 from __future__ import annotations
@@ -34,11 +34,10 @@ from recognise_measure import MASK_ALPHA
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.cameras.warp import expected_depth
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
-from gt2gs_blender.core.transfer.layout import (
-    layout_images,
-)
+from gt2gs_blender.core.transfer.layout import layout_images, layout_shading, shade_width
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.plan import RunPlan, plan_run, run_texture
+from gt2gs_blender.core.transfer.shade import laid_exposure
 from gt2gs_blender.core.transfer.views import ViewSet, render_views
 
 SHARED = ROOT.parent / "shared"
@@ -133,16 +132,34 @@ def layout_start(run: RunPlan, texture: Path) -> GaussianScene:
 
 
 @torch.no_grad()
-def layout_surface(run: RunPlan, bench: BenchScene, texture: Path) -> list[tuple[np.ndarray, np.ndarray]]:
+def layout_surface(
+    run: RunPlan, bench: BenchScene, texture: Path, shaded: bool = False
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """(RGB uint8 over the background, alpha) per held-out view: the layout as an exact surface shows it there
     (``layout_images`` on the original scene's depth, no splats, the run's softened texture): the layout free of
     the splats' blur, over every pixel the measure counts (``measured``). A run's texture loss can draw the lines
-    sharper than this flat layout (at today's default the fern's run finds a texture more than its surface)."""
+    sharper than this flat layout (at today's default the fern's run finds a texture more than its surface).
+    ``shaded``: over the scene as the run's layout keeps it (Keep Scene, Scene Colour, Scene Brightness), the
+    image the layout term holds each view to: the run's own target, free of the splats."""
     assert run.frame is not None and run.config.layout
+    config, image = run.config, run_texture(texture, run.config)
     background = torch.tensor(bench.background, dtype=torch.float32)
-    views = measured(render_views(bench.scene.detach(), bench.held_out, background, run.config.backend))
+    views = measured(render_views(bench.scene.detach(), bench.held_out, background, config.backend))
+    kept = layout_shading(run.work, run.region, run.frame, config, image) if shaded else None
+    exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
+    laid = layout_images(
+        views,
+        image,
+        run.frame,
+        config.angle,
+        kept is not None,
+        shade_width(run.frame, config),
+        config.keep_scene,
+        config.scene_colour,
+        exposure,
+    )
     out = []
-    for image in layout_images(views, run_texture(texture, run.config), run.frame, run.config.angle):
+    for image in laid:
         rgb, alpha = image[..., :3].cpu().numpy(), image[..., 3].cpu().numpy()
         over = rgb * alpha[..., None] + (1.0 - alpha[..., None]) * np.asarray(bench.background, np.float32)
         out.append(((over.clip(0.0, 1.0) * 255 + 0.5).astype(np.uint8), alpha))
