@@ -142,14 +142,14 @@ def layout_surface(
     ``shaded``: over the scene as the run's layout keeps it (Keep Scene, Scene Colour, Scene Brightness), the
     image the layout term holds each view to: the run's own target, free of the splats."""
     assert run.frame is not None and run.config.layout
-    config, image = run.config, run_texture(texture, run.config)
+    config, photo = run.config, run_texture(texture, run.config)
     background = torch.tensor(bench.background, dtype=torch.float32)
     views = measured(render_views(bench.scene.detach(), bench.held_out, background, config.backend))
-    kept = layout_shading(run.work, run.region, run.frame, config, image) if shaded else None
+    kept = layout_shading(run.work, run.region, run.frame, config, photo) if shaded else None
     exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
     laid = layout_images(
         views,
-        image,
+        photo,
         run.frame,
         config.angle,
         kept is not None,
