@@ -20,6 +20,7 @@ import recognise_measure as measure
 import recognise_scenes as scenes
 
 from gt2gs_blender.core.cameras.warp import expected_depth
+from gt2gs_blender.core.transfer.losses import LUMA
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.presets import preset
 from gt2gs_blender.core.transfer.views import ViewSet
@@ -83,7 +84,7 @@ def test_the_target_with_nothing_of_the_scene_kept_is_the_surface():
 
 def _luma_correlation(image: np.ndarray, reference: np.ndarray, counted: np.ndarray) -> float:
     """Pearson correlation of two uint8 RGB images' luminance over the ``counted`` pixels."""
-    luma = np.array([0.299, 0.587, 0.114])
+    luma = np.asarray(LUMA)
     return float(np.corrcoef((image @ luma)[counted], (reference @ luma)[counted])[0, 1])
 
 
