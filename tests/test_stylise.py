@@ -98,6 +98,40 @@ def test_nnfm_steps_match_without_the_prior_weigh_cells_alike_and_keep_the_carri
     assert set(styliser.angle_maps) == {0} and not torch.equal(weighted, torch.ones_like(weighted))
 
 
+def test_texture_strength_zero_matches_nothing_and_hands_the_plateau_the_loss_it_minimises():
+    """With Texture Strength 0 a stylise step matches no texture (no angles are recorded) and hands the plateau
+    the loss it minimises, here the content term recomputed from a render, which falls as the steps fit a
+    darkened start back to its content (the unweighted texture loss would not fall, and stopped a layout-only run
+    after two windows); with Texture Strength 1 it matches."""
+    from gt2gs_blender.core.transfer.losses import content_loss
+
+    original = blob_scene(300, seed=4).with_sh_degree(0)
+    start = replace(original, sh_dc=original.sh_dc - 0.3)
+    cameras = auto_views(original, 3, width=48, height=48)
+    config = TransferConfig(
+        stylise_steps=12,
+        correct_steps=0,
+        rounds=1,
+        densify=False,
+        n_scales=1,
+        lambda_style=0.0,
+        lambda_content=1.0,
+        lambda_tv=0.0,
+    )
+    styliser = gpb_only(original, start, cameras, config, torch.ones(3))
+    view = styliser.views[styliser.order[0]]
+    image = render(styliser.scene.detach(), [view.camera], background=view.backdrop).colors[0]
+    expected = config.lambda_content * float(
+        content_loss(styliser.extractor(image.permute(2, 0, 1)[None]), view.content_features)
+    )
+    losses = [styliser.stylise_step(densify=False)[0] for _ in range(config.stylise_steps)]
+    assert losses[0] == pytest.approx(expected, rel=1e-3)
+    assert styliser.angle_maps == {} and sum(losses[-3:]) < 0.8 * sum(losses[:3])
+    textured = gpb_only(original, start, cameras, replace(config, lambda_style=1.0), torch.ones(3))
+    textured.stylise_step(densify=False)
+    assert set(textured.angle_maps) == {textured.order[0]}
+
+
 @pytest.mark.parametrize("prune_large", [False, True])
 def test_prune_large_removes_splats_wider_than_a_fifth_of_the_extent_when_densifying(prune_large):
     original = blob_scene(300, seed=4).with_sh_degree(0)

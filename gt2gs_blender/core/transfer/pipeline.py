@@ -104,7 +104,8 @@ def stylise(
             if phase != "correct":
                 loss, image = styliser.stylise_step(densify, nnfm=phase == "nnfm")
                 preview = _preview(image) if styliser.report.stylise_steps % config.preview_every == 1 else None
-                message = f"stylise: texture loss {loss:.3f}, {len(styliser.scene):,} Gaussians"
+                watched = "texture loss" if config.lambda_style > 0 else "loss"
+                message = f"stylise: {watched} {loss:.3f}, {len(styliser.scene):,} Gaussians"
             else:
                 loss, preview = styliser.correct_step(), None
                 message = f"preserve geometry: loss {loss:.4f}"

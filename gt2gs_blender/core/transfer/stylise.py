@@ -206,7 +206,8 @@ class Styliser:
     # -- stylise ----------------------------------------------------------------------------------
     def stylise_step(self, densify: bool, nnfm: bool = False) -> tuple[float, torch.Tensor]:
         """One GT² step on the next view in order (``nnfm``: a plain nearest-match step of an NNFM
-        half-round); (texture loss, the rendered image over the background)."""
+        half-round); (the loss a plateau watches: the texture loss, or with Texture Strength 0 the step's whole
+        loss, the layout fit; the rendered image over the background). Texture Strength 0 matches nothing."""
         cfg = self.config
         v = self.order[self.cursor]
         view = self.views[v]
@@ -214,11 +215,9 @@ class Styliser:
         out = self._stylise_render(v, view)
         image = out.colors[0]
         feats = self.extractor(image.permute(2, 0, 1)[None])
-        distances, weights = self._texture_terms(feats[0], v, view, nnfm)
-        counted = view.mask
-        style = (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
+        style = self._texture_loss(feats[0], v, view, nnfm) if cfg.lambda_style > 0 else None
         loss = (
-            cfg.lambda_style * style
+            (0.0 if style is None else cfg.lambda_style * style)
             + cfg.lambda_content * content_loss(feats, view.content_features)
             + cfg.lambda_tv * tv_loss(image[None])
         )
@@ -254,7 +253,7 @@ class Styliser:
                 }
             )
         shown = image.detach() + (1.0 - out.alphas[0].detach()[..., None]) * (self.background - view.backdrop)
-        return float(style.detach()), shown
+        return float((loss if style is None else style).detach()), shown
 
     def _stylise_render(self, v: int, view: ViewTargets) -> RenderOutput:
         """View ``v`` with the current colours. While the splats hold still (a colour-only step, and
@@ -272,6 +271,13 @@ class Styliser:
         if fixed is None:
             return render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
         return fixed.render(self.scene, background=view.backdrop)
+
+    def _texture_loss(self, feats: torch.Tensor, v: int, view: ViewTargets, nnfm: bool) -> torch.Tensor:
+        """The texture loss of view ``v``: the AFCM-weighted distance to the matched targets over its covered
+        cells (:meth:`_texture_terms`)."""
+        distances, weights = self._texture_terms(feats, v, view, nnfm)
+        counted = view.mask
+        return (weights * distances)[counted].mean() if counted.any() else distances.sum() * 0.0
 
     def _texture_terms(
         self, feats: torch.Tensor, v: int, view: ViewTargets, nnfm: bool = False
