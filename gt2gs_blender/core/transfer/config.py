@@ -255,7 +255,13 @@ class TransferConfig(SpeedSettings):
         max=3,
     )
     lambda_style: float = setting(
-        1.0, "Texture Strength", "Weight of the texture loss", "stylise", min=0.0, soft_max=10.0
+        1.0,
+        "Texture Strength",
+        "How strongly the texture loss draws the photo's look into the result; 0 turns it off (with Lay Out Texture "
+        "on: the laid-out texture alone, fitted to every view)",
+        "stylise",
+        min=0.0,
+        soft_max=10.0,
     )
     lambda_content: float = setting(
         0.005,
