@@ -68,7 +68,15 @@ sys.path.insert(0, str(ROOT))
 
 import recognise_measure as measure
 from common import parse_overrides
-from recognise_scenes import SCENES, BenchScene, layout_start, layout_surface, load_bench_scene, run_start
+from recognise_scenes import (
+    SCENES,
+    BenchScene,
+    layout_start,
+    layout_surface,
+    load_bench_scene,
+    run_start,
+    surface_views,
+)
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.transfer.metrics import masked_ssim
@@ -306,6 +314,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
         for p, r in starts.items()
     }
     alphas = [alpha for _, alpha in original_views]
+    surfaces = {p: surface_views(bench, r.config.backend) for p, r in starts.items() if r.config.layout}
     folder = OUT / args.tag / name  # the results, whatever size measures them
     pictures = OUT / output_name(args) / name
     for texture in args.textures:
@@ -343,7 +352,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             for k, (rgb, _) in enumerate(views):
                 cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
             for kind, shaded in (("target", True), ("surface", False)):
-                views = layout_surface(run, bench, texture_path(texture), shaded)
+                views = layout_surface(run, bench, texture_path(texture), shaded, surfaces[preset_name])
                 p = row(name, texture, variant.removesuffix("-start") + f"-{kind}", score(view_stats(views), stats))
                 p.update(scene_side(views, original_views))
                 rows.append(p)

@@ -133,18 +133,18 @@ def layout_start(run: RunPlan, texture: Path) -> GaussianScene:
 
 @torch.no_grad()
 def layout_surface(
-    run: RunPlan, bench: BenchScene, texture: Path, shaded: bool = False
+    run: RunPlan, bench: BenchScene, texture: Path, shaded: bool = False, views: ViewSet | None = None
 ) -> list[tuple[np.ndarray, np.ndarray]]:
     """(RGB uint8 over the background, alpha) per held-out view: the layout as an exact surface shows it there
     (``layout_images`` on the original scene's depth, no splats, the run's softened texture): the layout free of
     the splats' blur, over every pixel the measure counts (``measured``). A run's texture loss can draw the lines
     sharper than this flat layout (at today's default the fern's run finds a texture more than its surface).
     ``shaded``: over the scene as the run's layout keeps it (Keep Scene, Scene Colour, Scene Brightness), the
-    image the layout term holds each view to: the run's own target, free of the splats."""
+    image the layout term holds each view to: the run's own target, free of the splats. ``views``: the scene's
+    :func:`surface_views` for ``run``, rendered once for many textures (None: rendered here)."""
     assert run.frame is not None and run.config.layout
     config, photo = run.config, run_texture(texture, run.config)
-    background = torch.tensor(bench.background, dtype=torch.float32)
-    views = measured(render_views(bench.scene.detach(), bench.held_out, background, config.backend))
+    views = surface_views(bench, config.backend) if views is None else views
     kept = layout_shading(run.work, run.region, run.frame, config, photo) if shaded else None
     exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
     laid = layout_images(
@@ -164,6 +164,14 @@ def layout_surface(
         over = rgb * alpha[..., None] + (1.0 - alpha[..., None]) * np.asarray(bench.background, np.float32)
         out.append(((over.clip(0.0, 1.0) * 255 + 0.5).astype(np.uint8), alpha))
     return out
+
+
+@torch.no_grad()
+def surface_views(bench: BenchScene, backend: str) -> ViewSet:
+    """The original scene's held-out views as :func:`layout_surface` lays the texture on them (``measured``): the
+    same for every texture of a scene."""
+    background = torch.tensor(bench.background, dtype=torch.float32)
+    return measured(render_views(bench.scene.detach(), bench.held_out, background, backend))
 
 
 def measured(views: ViewSet) -> ViewSet:
