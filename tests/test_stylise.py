@@ -49,6 +49,13 @@ def gpb_only(
     return Styliser(start, targets, list(range(len(cameras))), bank, extractor, config, background)
 
 
+def stylise_only(steps: int, **overrides) -> TransferConfig:
+    """``steps`` stylise steps in one round, no correction and no densification, one texture scale."""
+    return TransferConfig(
+        **{"stylise_steps": steps, "correct_steps": 0, "rounds": 1, "densify": False, "n_scales": 1, **overrides}
+    )
+
+
 def run_corrections(styliser: Styliser) -> None:
     for _ in range(styliser.config.correct_steps):
         styliser.correct_step()
@@ -88,7 +95,7 @@ def test_paper_presets_run_the_authors_rounds(name, rounds, half_round):
 def test_nnfm_steps_match_without_the_prior_weigh_cells_alike_and_keep_the_carried_angles():
     original = blob_scene(300, seed=4).with_sh_degree(0)
     cameras = auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(stylise_steps=2, correct_steps=0, rounds=1, densify=False, n_scales=1, nnfm_half=True)
+    config = stylise_only(2, nnfm_half=True)
     styliser = gpb_only(original, original, cameras, config, torch.ones(3))
     view = styliser.views[0]
     feats = styliser.extractor(view.content_image.permute(2, 0, 1)[None])
@@ -108,16 +115,7 @@ def test_texture_strength_zero_matches_nothing_and_hands_the_plateau_the_loss_it
     original = blob_scene(300, seed=4).with_sh_degree(0)
     start = replace(original, sh_dc=original.sh_dc - 0.3)
     cameras = auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(
-        stylise_steps=12,
-        correct_steps=0,
-        rounds=1,
-        densify=False,
-        n_scales=1,
-        lambda_style=0.0,
-        lambda_content=1.0,
-        lambda_tv=0.0,
-    )
+    config = stylise_only(12, lambda_style=0.0, lambda_content=1.0, lambda_tv=0.0)
     styliser = gpb_only(original, start, cameras, config, torch.ones(3))
     view = styliser.views[styliser.order[0]]
     image = render(styliser.scene.detach(), [view.camera], background=view.backdrop).colors[0]
@@ -194,9 +192,7 @@ def test_stylise_phases_move_geometry_only_when_told(choice, capture, moved):
     from the front, not for views around the object."""
     original = blob_scene(300, seed=4).with_sh_degree(0)
     cameras = front_capture(original, 3) if capture else auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(
-        stylise_steps=4, correct_steps=0, rounds=1, densify=False, n_scales=1, stylise_geometry=choice
-    )
+    config = stylise_only(4, stylise_geometry=choice)
     styliser = gpb_only(original, original, cameras, config, torch.ones(3))
     for _ in range(config.stylise_steps):
         styliser.stylise_step(densify=False)
@@ -215,15 +211,7 @@ def test_stylise_renders_see_the_object_not_the_background(object_backdrop):
     Previews are over the background either way. (AFCM off: its detail map keeps the outline on purpose.)"""
     original = blob_scene(300, seed=4).with_sh_degree(0)
     cameras = auto_views(original, 3, width=48, height=48)
-    config = TransferConfig(
-        stylise_steps=3,
-        correct_steps=0,
-        rounds=1,
-        densify=False,
-        n_scales=1,
-        afcm=False,
-        object_backdrop=object_backdrop,
-    )
+    config = stylise_only(3, afcm=False, object_backdrop=object_backdrop)
     colours = []
     for background in (torch.ones(3), torch.zeros(3)):
         styliser = gpb_only(original, original, cameras, config, background)
