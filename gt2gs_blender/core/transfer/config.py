@@ -104,7 +104,8 @@ class TransferConfig(SpeedSettings):
         "Keep Scene",
         "How much of the scene's light and dark shows through the laid-out texture: 1 all of it (edges and "
         "parts read; the texture fainter in dark parts); 0.85 eases the darks so the texture reads there too; "
-        "on a dark capture (a guitar on its stand) 0.3 lets the pattern read, for some of the capture's own detail; "
+        "on a dark capture (a guitar on its stand) lower values lay more of the pattern, at the cost of the "
+        "capture's own parts (its sunburst, its pickups); "
         "0 lays the texture evenly, so only the outline shows the scene",
         "texture",
         min=0.0,
