@@ -34,7 +34,7 @@ from recognise_measure import MASK_ALPHA
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.cameras.warp import expected_depth
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
-from gt2gs_blender.core.transfer.layout import layout_images, layout_shading, shade_width
+from gt2gs_blender.core.transfer.layout import bright_images, layout_bright, layout_images, layout_shading, shade_width
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.plan import RunPlan, plan_run, run_texture
 from gt2gs_blender.core.transfer.shade import laid_exposure
@@ -145,8 +145,10 @@ def layout_surface(
     assert run.frame is not None and run.config.layout
     config, photo = run.config, run_texture(texture, run.config)
     views = surface_views(bench, config.backend) if views is None else views
-    kept = layout_shading(run.work, run.region, run.frame, config, photo) if shaded else None
+    bright = layout_bright(run.work, run.region, config) if shaded else None
+    kept = layout_shading(run.work, run.region, run.frame, config, photo, bright) if shaded else None
     exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
+    lit = None if bright is None else bright_images(run.work, views, bright, config.backend)
     laid = layout_images(
         views,
         photo,
@@ -157,6 +159,7 @@ def layout_surface(
         config.keep_scene,
         config.scene_colour,
         exposure,
+        lit,
     )
     out = []
     for image in laid:

@@ -533,6 +533,69 @@ def test_scene_brightness_below_one_takes_that_share_of_the_exposure_s_stops():
     assert float(full[0]) > 1.5 and torch.allclose(half, full.sqrt()) and bool((none == 1.0).all())
 
 
+def two_material_wall() -> tuple[GaussianScene, Camera]:
+    """The wall of dark material (0.1) on its left half and light (0.6) on its right, both under one light that
+    falls evenly from 1 at the top to 0.5 at the bottom (its median 0.75), and its front camera."""
+    base, cam = wall(n=80), front_camera(96)
+    light = 0.75 - 0.25 * base.means[:, 1]  # y = -1 is the top on screen
+    albedo = torch.where(base.means[:, 0] < 0, 0.1, 0.6)
+    return with_colours(base, (albedo * light)[:, None].expand(-1, 3)), cam
+
+
+@pytest.mark.parametrize("brightness", [1.0, 0.0])
+def test_keep_material_zero_gives_each_part_the_texture_s_brightness_and_keeps_the_light(shared, tmp_path, brightness):
+    """A white texture on the two-material wall at Keep Scene 1, Scene Colour 0: with Keep Material 0 both halves
+    come out alike, each splat its light over its part's median (1 down the upper half, falling to 0.5 / 0.75 at
+    the bottom), whatever Scene Brightness says; with Keep Material 1 (and Scene Brightness 0) the dark half stays
+    1/6 as bright as the light one. The preview shows the zero-step run, and the layout term's image (the shade per
+    pixel against the material it shows) agrees."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.layout import bright_images, layout_bright
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+
+    scene, cam = two_material_wall()
+    white = np.ones((64, 64, 3), np.float32)
+    settings = dict(keep_scene=1.0, scene_colour=0.0, scene_brightness=brightness)
+    config = zero_step_config(shared, tmp_path, keep_material=0.0, **settings)
+    result = transfer(scene, white, [cam], config)
+    colours, x, y = result.scene.base_colors.mean(1), result.scene.means[:, 0], result.scene.means[:, 1]
+    expected = ((0.75 - 0.25 * y) / 0.75).clamp(max=1.0)
+    assert float((colours - expected).abs().max()) < 0.02
+    assert float(colours[x < 0].mean()) == pytest.approx(float(colours[x > 0].mean()), abs=0.01)
+    shown = render(result.scene, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(preview(scene, white, [cam], config, size=96).image.astype(np.float32) - shown).max() <= 1.0
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    lit = bright_images(scene, views, layout_bright(scene, None, config), "auto")
+    (ideal,) = layout_images(views, white, layout_frame(scene, views, config), 0.0, True, bright=lit)
+    top, bottom = ideal[22:30, 22:74, 0], ideal[66:74, 22:74, 0]  # the wall spans rows and columns 19-77
+    assert float(top.mean()) == pytest.approx(1.0, abs=0.02)
+    assert float(bottom.mean()) == pytest.approx(float(expected[(y > 0.6) & (y < 0.9)].mean()), abs=0.03)
+    today = zero_step_config(
+        shared, tmp_path, keep_material=1.0, keep_scene=1.0, scene_colour=0.0, scene_brightness=0.0
+    )
+    kept = transfer(scene, white, [cam], today).scene
+    grey, x = kept.base_colors.mean(1), kept.means[:, 0]
+    ratio = grey[x < -0.05].mean() / grey[x > 0.05].mean()  # away from the seam, where children cross it
+    assert float(ratio) == pytest.approx(1 / 6, abs=0.01)
+
+
+def test_material_bright_is_each_part_s_median_against_the_scene_s_bright_end():
+    """Two parts, luminance 0.1-0.3 and 0.5-0.9: Keep Material 1 takes the scene's bright end (its 95th
+    percentile) everywhere, 0 each part's median, 0.5 their geometric mean; a part of one splat is its own."""
+    from gt2gs_blender.core.transfer.shade import bright_end, material_bright
+
+    luminance = torch.tensor([0.1, 0.2, 0.3, 0.5, 0.7, 0.9, 0.05])
+    labels = torch.tensor([3, 3, 3, 1, 1, 1, 7])
+    overall = bright_end(luminance)
+    assert overall == pytest.approx(0.9)
+    medians = torch.tensor([0.2, 0.2, 0.2, 0.7, 0.7, 0.7, 0.05])
+    assert torch.allclose(material_bright(luminance, labels, 1.0), torch.full((7,), overall))
+    assert torch.allclose(material_bright(luminance, labels, 0.0), medians)
+    assert torch.allclose(material_bright(luminance, labels, 0.5), (medians * overall).sqrt())
+    black = material_bright(torch.zeros(3), torch.zeros(3, dtype=torch.long), 0.0)
+    assert bool(torch.isfinite(black).all()) and float(black.min()) > 0
+
+
 def test_exposure_keeps_colours_in_range_and_in_order_and_is_continuous_at_one():
     """``exposed``: a gain below 1, the luminance to the power 1/e above, so 0..1 stays 0..1 at every exposure in
     range, each colour grows with the exposure, and the two sides meet at 1 (the colours as they are); lighter

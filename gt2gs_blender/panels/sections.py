@@ -36,7 +36,15 @@ SECTION_OF_PART = {
 }
 """Which sub-panel shows the settings of each part of the method."""
 FRONT = {
-    "Texture": ("angle", "texture_repeats", "texture_softness", "keep_scene", "scene_colour", "scene_brightness"),
+    "Texture": (
+        "angle",
+        "texture_repeats",
+        "texture_softness",
+        "keep_scene",
+        "keep_material",
+        "scene_colour",
+        "scene_brightness",
+    ),
     "Views": ("n_views",),
     "Quality": ("lambda_content",),
 }
@@ -106,6 +114,7 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "keep_scene": lambda s: s.layout,
     "scene_colour": lambda s: s.layout,
     "scene_brightness": lambda s: s.layout,
+    "keep_material": lambda s: s.layout and (s.keep_scene > 0 or s.scene_brightness > 0),  # the shade, the exposure
     "shade_softness": lambda s: s.layout and (s.keep_scene > 0 or s.scene_colour > 0),  # what it averages
     "split_size": lambda s: s.layout,
     "split_first": lambda s: s.layout and s.split_size > 0,

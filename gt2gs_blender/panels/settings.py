@@ -36,6 +36,7 @@ PREVIEWED = (
     "layout",
     "layout_projection",
     "keep_scene",
+    "keep_material",
     "scene_colour",
     "scene_brightness",
     "shade_softness",

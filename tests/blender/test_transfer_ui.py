@@ -561,6 +561,7 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
         "texture_repeats",
         "texture_softness",
         "keep_scene",
+        "keep_material",
         "scene_colour",
         "scene_brightness",
     ]
@@ -631,7 +632,8 @@ def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
 
 def test_settings_a_run_ignores_are_greyed_out(fresh):
     """Texture Size counts only at Texture Repeats 0; the layout's split and strength only with the layout on,
-    Scene Softness only while Keep Scene or Scene Colour is above 0."""
+    Scene Softness only while Keep Scene or Scene Colour is above 0, Keep Material only while Keep Scene or Scene
+    Brightness is."""
     from gt2gs_blender.panels.sections import USED_WHEN, setting_used
 
     settings = fresh.context.scene.gt2gs
@@ -643,6 +645,9 @@ def test_settings_a_run_ignores_are_greyed_out(fresh):
     assert setting_used(settings, "shade_softness")  # the colour it keeps is still averaged over it
     settings.scene_colour = 0.0
     assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_scene")
+    assert setting_used(settings, "keep_material")  # Scene Brightness still takes its share of the exposure
+    settings.scene_brightness = 0.0
+    assert not setting_used(settings, "keep_material")  # neither a shade nor an exposure left to take it
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
     assert setting_used(settings, "angle")

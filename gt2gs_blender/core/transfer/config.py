@@ -133,6 +133,16 @@ class TransferConfig(SpeedSettings):
         min=0.0,
         max=1.0,
     )
+    keep_material: float = setting(
+        1.0,
+        "Keep Material",
+        "How much of each part's own brightness stays under the laid-out texture: 1 keeps dark wood and black "
+        "metal dark, the texture darkened with them; 0 gives every part (as Find Parts finds them) the texture's "
+        "own brightness and keeps only the light and shade across it, so straw on a dark guitar reads as straw",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
     shade_softness: float = setting(
         0.0,
         "Scene Softness",

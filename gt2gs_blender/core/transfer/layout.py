@@ -50,12 +50,13 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
+from ..scene.parts import find_parts
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .grain import periodic_blur
 from .losses import LUMA
 from .setting import Projection
-from .shade import kept_scene, layout_shade, shading, spatial_blur, under_scene
+from .shade import bright_end, kept_scene, layout_shade, material_bright, shading, spatial_blur, under_scene
 from .texture_bank import bank_scales, screen_rotation
 from .views import ViewSet
 
@@ -277,6 +278,7 @@ def layout_images(
     keep: float = 1.0,
     colour: float = 0.0,
     exposure: float = 1.0,
+    bright: Sequence[torch.Tensor] | None = None,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
@@ -284,9 +286,14 @@ def layout_images(
     ``shaded``: over the view's own scene as the layout lays it (:func:`under_scene`): its colour averaged over
     the surface points within about ``softness`` (a world length, by :func:`spatial_blur`), the texture times
     that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in, the mix at the
-    splats' ``exposure`` (:func:`laid_exposure`)."""
+    splats' ``exposure`` (:func:`laid_exposure`); the shade is taken against the bright end of the view's
+    surface, or against ``bright`` (H, W per view: the luminance each pixel's material shows fully lit,
+    :func:`bright_images`)."""
     images = []
-    for camera, depth, alpha, premultiplied in zip(views.cameras, views.depths, views.alphas, views.premultiplied):
+    lit_at = [None] * len(views.cameras) if bright is None else bright
+    for camera, depth, alpha, premultiplied, lit in zip(
+        views.cameras, views.depths, views.alphas, views.premultiplied, lit_at
+    ):
         normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
         z = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA)
         covered = alpha.cpu() >= SURFACE_ALPHA
@@ -298,7 +305,8 @@ def layout_images(
             seen = (premultiplied.cpu()[covered].float() / weight[:, None]).clamp(0.0, 1.0)
             if softness > 0:  # the same average as the splats' shade
                 seen = torch.stack([spatial_blur(points, seen[:, c], weight, softness) for c in range(3)], dim=1)
-            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep), seen, colour, exposure)
+            full = None if lit is None else lit.cpu()[covered].float()
+            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep, bright=full), seen, colour, exposure)
             colours = under_scene(colours, kept)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
@@ -419,15 +427,49 @@ def lay_out(
 
 
 def layout_shading(
-    scene: GaussianScene, rows: torch.Tensor | None, frame: LayoutFrame, config: TransferConfig, texture: np.ndarray
+    scene: GaussianScene,
+    rows: torch.Tensor | None,
+    frame: LayoutFrame,
+    config: TransferConfig,
+    texture: np.ndarray,
+    bright: torch.Tensor | None = None,
 ) -> torch.Tensor | None:
     """What of the scene a run with ``config`` lays ``texture`` over (:func:`layout_shade`, ``shade_softness``
-    repeats of ``frame``, ``keep_scene``, ``scene_colour``, ``scene_brightness``), or None when it keeps the
-    texture's own colours."""
+    repeats of ``frame``, ``keep_scene``, ``scene_colour``, ``scene_brightness``, the shade against ``bright``,
+    :func:`layout_bright`), or None when it keeps the texture's own colours. *Scene Brightness* keeps only
+    ``keep_material`` of its exposure (in stops): a part given the texture's brightness is not darkened back."""
     if not keeps_scene(config):
         return None
     width = shade_width(frame, config)
-    return layout_shade(scene, rows, width, config.keep_scene, config.scene_colour, texture, config.scene_brightness)
+    brightness = config.scene_brightness * config.keep_material
+    return layout_shade(scene, rows, width, config.keep_scene, config.scene_colour, texture, brightness, bright)
+
+
+def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> torch.Tensor | None:
+    """(N,) the luminance each splat's material shows fully lit (:func:`material_bright` over the parts
+    ``find_parts`` finds, among the splats of ``rows``; the others take the bright end), or None with
+    ``keep_material`` 1 (the whole scene's bright end, as the shade takes it then)."""
+    if config.keep_material >= 1.0 or not keeps_scene(config):
+        return None
+    colours = scene.base_colors.detach().clamp(0.0, 1.0)
+    luminance = colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+    labels = torch.from_numpy(find_parts(scene).labels).to(luminance.device)
+    part = torch.ones_like(labels, dtype=torch.bool) if rows is None else rows.to(labels.device)
+    bright = torch.full_like(luminance, bright_end(luminance[part]))
+    bright[part] = material_bright(luminance[part], labels[part], config.keep_material)
+    return bright
+
+
+@torch.no_grad()
+def bright_images(scene: GaussianScene, views: ViewSet, bright: torch.Tensor, backend: str) -> list[torch.Tensor]:
+    """(H, W) per view: ``bright`` (N, :func:`layout_bright`) as the view sees the splats, blended as their
+    colours are, so a pixel's shade is taken against the material it shows."""
+    values = bright[:, None].expand(-1, 3).to(scene.means).contiguous()
+    images = []
+    for camera in views.cameras:
+        out = render(scene.detach(), [camera], colors=values, render_depth=False, backend=backend)
+        images.append(out.colors[0][..., 0] / out.alphas[0].clamp_min(1e-6))
+    return images
 
 
 def shade_width(frame: LayoutFrame, config: TransferConfig) -> float:

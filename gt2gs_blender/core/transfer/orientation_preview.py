@@ -28,7 +28,7 @@ from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
-from .layout import lay_out, layout_shading
+from .layout import lay_out, layout_bright, layout_shading
 from .losses import LUMA
 from .plan import RunPlan, plan_run
 from .region import assemble
@@ -126,7 +126,7 @@ def laid_out_start(plan: RunPlan) -> GaussianScene:
     same children); hidden splats keep their colours, as the run keeps them."""
     config, frame, texture = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
-    shade = layout_shading(work, region, frame, config, texture)
+    shade = layout_shading(work, region, frame, config, texture, layout_bright(work, region, config))
     laid = lay_out(work, region, plan.content, texture, frame, config, shade)
     if config.split_size > 0:
         laid, region = add_detail(laid, laid.base_colors, region, plan.content, texture, frame, config, shade)

@@ -29,7 +29,7 @@ from .bank import build_bank, nnfm_bank
 from .config import TransferConfig, keeps_scene
 from .content import content_degree
 from .detail import add_detail, split_for_detail
-from .layout import lay_out, layout_images, layout_shading, shade_width
+from .layout import bright_images, lay_out, layout_bright, layout_images, layout_shading, shade_width
 from .metrics import COVERED, MEASURE_SIDE, MEASURE_STRIDE, preview_ssim
 from .orientation_preview import first_view, show
 from .plan import RunPlan, plan_run
@@ -175,7 +175,11 @@ def _transfer(
     config, frame, image = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
     # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
-    shade = layout_shading(work, region, frame, config, image) if frame is not None and config.layout else None
+    laying = frame is not None and config.layout
+    bright = layout_bright(work, region, config) if laying else None
+    shade = layout_shading(work, region, frame, config, image, bright) if laying else None
+    measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
+    lit = bright_images(work, plan.used, bright, config.backend) if measured else None
     if config.color_transfer:
         work = apply_color_transfer(work, plan.content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -208,7 +212,7 @@ def _transfer(
     if frame is not None and config.layout and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
         ideal = layout_images(
-            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour, exposure
+            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour, exposure, lit
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     tracker.end()

@@ -69,12 +69,14 @@ def layout_shade(
     colour: float = 0.0,
     texture: np.ndarray | None = None,
     brightness: float = 0.0,
+    bright: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """(N, 5) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
     averaged over its neighbours within about ``softness`` (a world length, 0: its own), that colour's
-    luminance over the bright end of those splats', to the power ``keep`` (:func:`shading`), and ``brightness``
-    of the exposure that gives ``texture`` laid over them the scene's mean luminance (:func:`brightness_exposure`,
-    in stops); the other splats keep the texture as it is."""
+    luminance over the bright end of those splats' (or over each splat's own ``bright`` (N,), the luminance its
+    material shows fully lit: :func:`material_bright`), to the power ``keep`` (:func:`shading`), and
+    ``brightness`` of the exposure that gives ``texture`` laid over them the scene's mean luminance
+    (:func:`brightness_exposure`, in stops); the other splats keep the texture as it is."""
     colours = scene.base_colors.detach().clamp(0.0, 1.0)
     kept = kept_scene(torch.ones(len(scene), dtype=scene.dtype, device=scene.device), colours, 0.0)
     part = slice(None) if rows is None else rows
@@ -85,7 +87,8 @@ def layout_shade(
         points, weights = scene.means.detach()[part], scene.opacities.detach()[part]
         seen = torch.stack([spatial_blur(points, seen[:, c], weights, softness) for c in range(3)], dim=1)
     luminance = seen @ torch.tensor(LUMA, dtype=seen.dtype, device=seen.device)
-    mixed = kept_scene(shading(luminance, keep=keep), seen, colour)
+    lit_at = None if bright is None else bright[part].to(luminance)
+    mixed = kept_scene(shading(luminance, keep=keep, bright=lit_at), seen, colour)
     if texture is not None and brightness > 0:
         weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
         mixed[:, 4] = brightness_exposure(texture, mixed, luminance, weights) ** brightness
@@ -246,12 +249,42 @@ def _gaussian_blur_3d(grid: torch.Tensor, sigma_cells: float) -> torch.Tensor:
     return grid
 
 
-def shading(luminance: torch.Tensor, reference: torch.Tensor | None = None, keep: float = 1.0) -> torch.Tensor:
-    """``luminance`` over the ``SHADE_QUANTILE`` of ``reference`` (default: ``luminance`` itself), clipped to
-    [``SHADE_MIN``, 1], to the power ``keep``: the light and shade the layout and the sketch preview keep."""
-    values = (luminance if reference is None else reference).detach().float().reshape(-1)
-    if not len(values):
-        return torch.ones_like(luminance)
-    rank = max(1, round(SHADE_QUANTILE * len(values)))
-    bright = max(float(values.kthvalue(rank).values), 1e-6)
-    return (luminance / bright).clamp(SHADE_MIN, 1.0) ** keep
+def shading(
+    luminance: torch.Tensor,
+    reference: torch.Tensor | None = None,
+    keep: float = 1.0,
+    bright: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """``luminance`` over the :func:`bright_end` of ``reference`` (default: ``luminance`` itself), or over
+    ``bright`` (one per value: the luminance taken as fully lit there), clipped to [``SHADE_MIN``, 1], to the
+    power ``keep``: the light and shade the layout and the sketch preview keep."""
+    if bright is None:
+        values = luminance if reference is None else reference
+        if not values.numel():
+            return torch.ones_like(luminance)
+        bright = torch.tensor(bright_end(values), dtype=torch.float64)
+    return (luminance / bright.to(luminance).clamp_min(1e-6)).clamp(SHADE_MIN, 1.0) ** keep
+
+
+def bright_end(values: torch.Tensor) -> float:
+    """The ``SHADE_QUANTILE`` of ``values`` (1 when empty): the luminance a scene shows where it is fully lit."""
+    flat = values.detach().float().reshape(-1)
+    if not len(flat):
+        return 1.0
+    rank = max(1, round(SHADE_QUANTILE * len(flat)))
+    return max(float(flat.kthvalue(rank).values), 1e-6)
+
+
+def material_bright(luminance: torch.Tensor, labels: torch.Tensor, material: float) -> torch.Tensor:
+    """(N,) the luminance each splat counts as fully lit: the scene's :func:`bright_end` to the power
+    ``material`` times its part's median (``labels`` (N,), a part each) to the power ``1 - material``.
+
+    A dark capture's dark is mostly its material (dark wood, black metal), not its light; taken against the
+    whole scene's bright end it darkened the texture with it. Against its own part's median, each part's light
+    and shade stays while its own brightness goes (``material`` 0: the brighter half of each part fully lit)."""
+    overall = bright_end(luminance)
+    if material >= 1.0 or not len(luminance):
+        return torch.full_like(luminance, overall)
+    parts, index = labels.unique(return_inverse=True)
+    medians = torch.stack([luminance[index == k].float().median() for k in range(len(parts))]).to(luminance)
+    return overall**material * medians.clamp_min(1e-6)[index] ** (1.0 - material)
