@@ -138,7 +138,8 @@ class TransferConfig(SpeedSettings):
         "Keep Material",
         "How much of each part's own brightness stays under the laid-out texture: 1 keeps dark wood and black "
         "metal dark, the texture darkened with them; 0 gives every part (as Find Parts finds them) the texture's "
-        "own brightness and keeps only the light and shade across it, so straw on a dark guitar reads as straw",
+        "own brightness and keeps only the light and shade across it: straw on a dark guitar comes out "
+        "straw-coloured, but a bright scene loses the light and dark between its parts",
         "texture",
         min=0.0,
         max=1.0,
