@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
 from recognise import texture_path
-from recognise_scenes import CAPTURE_SCALE, CAPTURES, SCENES, load_bench_scene
+from recognise_scenes import SCENES, load_bench_scene
 
 from gt2gs_blender.core.api import GaussianScene, read_scene, render
 from gt2gs_blender.core.transfer.losses import LUMA
@@ -57,7 +57,7 @@ def main() -> None:
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-    bench = load_bench_scene(args.scene, 256 // CAPTURE_SCALE if args.scene in CAPTURES else 256)
+    bench = load_bench_scene(args.scene)  # held-out views at the size bench/recognise.py judges them
     cameras = list(bench.held_out)
     covered = [render(bench.scene, [c], render_depth=False).alphas[0] >= COVERED for c in cameras]
     original = mean_luminance(bench.scene, cameras, covered)
