@@ -174,13 +174,13 @@ def _transfer(
     plan = plan_run(scene, texture, views, config, region)
     config, frame, image = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
-    # the scene's own light and shade, before colour transfer changes it (as the preview takes it)
+    # the scene's own light and shade, as the preview takes it
     laying = frame is not None and config.layout
     bright = layout_bright(work, region, config) if laying else None
     shade = layout_shading(work, region, frame, config, image, bright) if laying else None
     measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
     lit = bright_images(work, plan.used, bright, config.backend) if measured else None
-    if config.color_transfer:
+    if config.color_transfer and not laying:  # the layout lays its own colours on every restyled splat
         work = apply_color_transfer(work, plan.content, image, region, config.backend)
     extractor = load_feature_extractor(
         config.features,
