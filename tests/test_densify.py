@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -151,7 +152,9 @@ def test_densify_and_prune_accounts_for_every_gaussian(n, seed, frozen_fraction,
     )
 
 
-def test_small_is_cloned_large_is_split_faint_is_pruned():
+@pytest.mark.parametrize("clone", [True, False])
+def test_small_is_cloned_large_is_split_faint_is_pruned(clone):
+    """``clone`` off (a colour-only run) leaves the small one as it is; the large one still splits."""
     scene = GaussianScene.from_activated(
         torch.zeros(4, 3),
         torch.tensor([[0.001] * 3, [0.5] * 3, [0.001] * 3, [0.001] * 3]),
@@ -163,13 +166,14 @@ def test_small_is_cloned_large_is_split_faint_is_pruned():
     stats.grad_sum[:] = torch.tensor([1.0, 1.0, 1.0, 0.0])
     stats.count[:] = 1
     report = densify_and_prune(
-        opt, stats, CONFIG, EXTENT, prune_large=False, generator=torch.Generator().manual_seed(0)
+        opt, stats, replace(CONFIG, clone=clone), EXTENT, prune_large=False, generator=torch.Generator().manual_seed(0)
     )
-    assert (report.cloned, report.split, report.pruned, report.total) == (1, 1, 1, 5)
+    clones = int(clone)
+    assert (report.cloned, report.split, report.pruned, report.total) == (clones, 1, 1, 4 + clones)
     scales = opt.scene.scales.detach()
-    assert torch.allclose(scales[:3, 0], torch.tensor([0.001, 0.001, 0.001]))
-    assert torch.allclose(scales[3:, 0], torch.full((2,), 0.5 / 1.6))
-    assert bool((opt.scene.means[3:].detach().abs() < 0.5 * 5).all())
+    assert torch.allclose(scales[: 2 + clones, 0], torch.full((2 + clones,), 0.001))
+    assert torch.allclose(scales[2 + clones :, 0], torch.full((2,), 0.5 / 1.6))
+    assert bool((opt.scene.means[2 + clones :].detach().abs() < 0.5 * 5).all())
 
 
 def test_prune_large_by_screen_and_world_size():

@@ -254,6 +254,47 @@ def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_g
         transfer(scene, stripes(), None, config, region=torch.zeros(len(scene), dtype=torch.bool))
 
 
+@pytest.mark.parametrize("stylise_geometry", ["off", "on"])
+def test_a_run_clones_splats_only_where_the_texture_loss_moves_them(tmp_path, stylise_geometry):
+    """While only the colours learn, a clone sits on its parent for good (the same splat twice: more opaque, no
+    finer), so a colour-only run splits its coarse splats and clones none; a run that moves splats clones too."""
+    scene = blob_scene()
+    fine = torch.arange(len(scene)) % 2 == 0
+    scene = replace(scene, log_scales=torch.where(fine[:, None], math.log(1e-3), scene.log_scales))
+    config = tiny(
+        cache_dir=str(tmp_path),
+        densify=True,
+        densify_every=2,
+        densify_grad_threshold=0.0,
+        densify_max_growth=100.0,
+        stylise_geometry=stylise_geometry,
+    )
+    grown = transfer(scene, stripes(), None, config).report["stylise"]["densified"]
+    assert grown and all(d["split"] > 0 for d in grown)
+    assert all((d["cloned"] > 0) == (stylise_geometry == "on") for d in grown)
+
+
+@pytest.mark.parametrize("stylise_geometry", ["off", "on"])
+def test_a_colour_only_run_adds_no_splats_to_those_the_layout_split(tmp_path, stylise_geometry):
+    """Splats the layout split to the texture's detail gain nothing from densifying while only their colours learn
+    (a clone stays on its parent; a random split reshapes the capture): such a run adds none, one that moves splats
+    does, and so does a colour-only run without the layout's split."""
+    config = tiny(
+        cache_dir=str(tmp_path),
+        layout=True,
+        split_first=True,
+        densify=True,
+        densify_every=2,
+        densify_grad_threshold=0.0,
+        densify_max_growth=100.0,
+        stylise_geometry=stylise_geometry,
+    )
+    grown = transfer(blob_scene(), stripes(), None, config).report["stylise"]["densified"]
+    assert bool(grown) == (stylise_geometry == "on")
+    unsplit = transfer(blob_scene(), stripes(), None, replace(config, split_size=0.0)).report["stylise"]["densified"]
+    assert unsplit and all(d["cloned"] + d["split"] > 0 for d in unsplit)
+
+
 def test_full_schedule_reports_its_phases(tmp_path):
     config = tiny(
         cache_dir=str(tmp_path), stylise_steps=6, correct_steps=4, rounds=2, gpb=True, densify=True, densify_every=3
@@ -275,7 +316,8 @@ def test_still_splats_are_redrawn_from_kept_weights_until_the_geometry_moves(tmp
     torch.testing.assert_close(on.scene.sh_dc, off.scene.sh_dc, atol=1e-4, rtol=0)
     torch.testing.assert_close(on.scene.means, off.scene.means, atol=1e-5, rtol=0)
     growing = replace(config, densify=True, densify_every=2, densify_grad_threshold=0.0, densify_max_growth=100.0)
-    densified = transfer(blob_scene(), stripes(), None, growing)
+    coarse = blob_scene()  # splats that still split at every densification (a colour-only run clones none)
+    densified = transfer(replace(coarse, log_scales=coarse.log_scales + math.log(4.0)), stripes(), None, growing)
     assert all(d["cloned"] + d["split"] > 0 for d in densified.report["stylise"]["densified"])
     assert densified.report["stylise"]["reused_weights"] == 6 - 3  # none in the densifying first phase
 

@@ -41,6 +41,9 @@ class DensifyConfig:
     grad_source: str = "position"
     percent_dense: float = 0.01
     """Gaussians larger than this fraction of the scene extent are split, smaller ones cloned."""
+    clone: bool = True
+    """Clone the small ones. A clone sits on its parent and only moves apart where the positions learn; while
+    only colours learn it is the same splat twice, more opaque and no finer, so a colour-only run turns it off."""
     split_count: int = 2
     min_opacity: float = 0.005
     max_screen_radius: float = 20.0
@@ -152,7 +155,7 @@ def densify_and_prune(
     prune &= ~opt.frozen
     grow = (stats.mean_grad() >= config.grad_threshold) & ~opt.frozen & ~prune
     small = max_scale <= config.percent_dense * extent
-    clone_ids = (grow & small).nonzero().squeeze(1)
+    clone_ids = (grow & small & config.clone).nonzero().squeeze(1)
     split_parents = (grow & ~small).nonzero().squeeze(1)
     count = config.split_count
     means, log_scales = _split_children(

@@ -306,7 +306,13 @@ class TransferConfig(SpeedSettings):
         "stylise",
         choices=get_args(Switch),
     )
-    densify: bool = setting(True, "Densify", "Add splats where the texture needs detail", "stylise")
+    densify: bool = setting(
+        True,
+        "Densify",
+        "Add splats where the texture needs detail (split coarse ones, copy small ones). A copy helps only while "
+        "Texture Moves Splats is on; with it off none is made, and none is added after Split Before Refining",
+        "stylise",
+    )
     densify_every: int = setting(
         25,
         "Densify Every",
