@@ -20,7 +20,7 @@ from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.losses import anisotropy
 from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.presets import preset
-from gt2gs_blender.core.transfer.stylise import GEOMETRY, Styliser
+from gt2gs_blender.core.transfer.stylise import GEOMETRY, Styliser, schedule
 from gt2gs_blender.core.transfer.texture_bank import build_texture_bank
 from gt2gs_blender.core.transfer.views import render_views, view_targets
 
@@ -63,24 +63,23 @@ def run_corrections(styliser: Styliser) -> None:
 
 def test_schedule_alternates_and_densifies_in_the_first_half():
     config = TransferConfig(stylise_steps=10, correct_steps=7, rounds=4, gpb=True, densify=True)
-    styliser = Styliser.__new__(Styliser)
-    styliser.config = config
-    phases = styliser.phases()
+    phases = schedule(config, moved_splats=False)
     assert [p[0] for p in phases] == ["stylise", "correct"] * 4
     assert sum(n for p, n, _ in phases if p == "stylise") == 10 and sum(n for p, n, _ in phases if p == "correct") == 7
     assert [d for p, _, d in phases if p == "stylise"] == [True, True, False, False]
-    styliser.config = replace(config, gpb=False)  # the same densifying half, no correction phases
-    assert styliser.phases() == [("stylise", 5, True), ("stylise", 5, False)]
-    styliser.config = replace(config, gpb=False, densify=False)
-    assert styliser.phases() == [("stylise", 10, False)]
+    # the same densifying half, no correction phases
+    assert schedule(replace(config, gpb=False), moved_splats=False) == [("stylise", 5, True), ("stylise", 5, False)]
+    assert schedule(replace(config, gpb=False, densify=False), moved_splats=False) == [("stylise", 10, False)]
+    laid = replace(config, layout=True)  # its splats split to the texture's detail first: no growth on them ...
+    assert not any(d for *_, d in schedule(laid, moved_splats=False))
+    assert schedule(laid, moved_splats=True) == phases  # ... unless they move
 
 
 @pytest.mark.parametrize("name, rounds, half_round", [("paper-llff", 10, (80, 200)), ("paper-360", 6, (400, 1000))])
 def test_paper_presets_run_the_authors_rounds(name, rounds, half_round):
     """configs/llff_texture.yaml and tnt_texture.yaml: each round is GT² s -> correct c -> NNFM s -> correct c,
     and style_trainer.py densifies in the first rounds // 2 rounds, at the end of every stylise phase."""
-    styliser = Styliser.__new__(Styliser)
-    styliser.config = preset(name)
+    config = preset(name)
     s, c = half_round
     densifying = [True] * (rounds // 2) + [False] * (rounds - rounds // 2)
     expected = [
@@ -88,8 +87,8 @@ def test_paper_presets_run_the_authors_rounds(name, rounds, half_round):
         for d in densifying
         for phase in (("stylise", s, d), ("correct", c, False), ("nnfm", s, d), ("correct", c, False))
     ]
-    assert styliser.phases() == expected
-    assert styliser.config.densify_every == s
+    assert schedule(config, moved_splats=config.stylise_geometry == "on") == expected
+    assert config.densify_every == s
 
 
 def test_nnfm_steps_match_without_the_prior_weigh_cells_alike_and_keep_the_carried_angles():
@@ -254,6 +253,19 @@ def test_region_control_leaves_other_gaussians_bit_identical(tmp_path, stylise_g
         transfer(scene, stripes(), None, config, region=torch.zeros(len(scene), dtype=torch.bool))
 
 
+def growing(tmp_path, stylise_geometry: str, **overrides) -> TransferConfig:
+    """A tiny run that densifies every other step wherever it may (any gradient, no cap on the growth)."""
+    return tiny(
+        cache_dir=str(tmp_path),
+        densify=True,
+        densify_every=2,
+        densify_grad_threshold=0.0,
+        densify_max_growth=100.0,
+        stylise_geometry=stylise_geometry,
+        **overrides,
+    )
+
+
 @pytest.mark.parametrize("stylise_geometry", ["off", "on"])
 def test_a_run_clones_splats_only_where_the_texture_loss_moves_them(tmp_path, stylise_geometry):
     """While only the colours learn, a clone sits on its parent for good (the same splat twice: more opaque, no
@@ -261,15 +273,7 @@ def test_a_run_clones_splats_only_where_the_texture_loss_moves_them(tmp_path, st
     scene = blob_scene()
     fine = torch.arange(len(scene)) % 2 == 0
     scene = replace(scene, log_scales=torch.where(fine[:, None], math.log(1e-3), scene.log_scales))
-    config = tiny(
-        cache_dir=str(tmp_path),
-        densify=True,
-        densify_every=2,
-        densify_grad_threshold=0.0,
-        densify_max_growth=100.0,
-        stylise_geometry=stylise_geometry,
-    )
-    grown = transfer(scene, stripes(), None, config).report["stylise"]["densified"]
+    grown = transfer(scene, stripes(), None, growing(tmp_path, stylise_geometry)).report["stylise"]["densified"]
     assert grown and all(d["split"] > 0 for d in grown)
     assert all((d["cloned"] > 0) == (stylise_geometry == "on") for d in grown)
 
@@ -279,16 +283,7 @@ def test_a_colour_only_run_adds_no_splats_to_those_the_layout_split(tmp_path, st
     """Splats the layout split to the texture's detail gain nothing from densifying while only their colours learn
     (a clone stays on its parent; a random split reshapes the capture): such a run adds none, one that moves splats
     does, and so does a colour-only run without the layout's split."""
-    config = tiny(
-        cache_dir=str(tmp_path),
-        layout=True,
-        split_first=True,
-        densify=True,
-        densify_every=2,
-        densify_grad_threshold=0.0,
-        densify_max_growth=100.0,
-        stylise_geometry=stylise_geometry,
-    )
+    config = growing(tmp_path, stylise_geometry, layout=True, split_first=True)
     grown = transfer(blob_scene(), stripes(), None, config).report["stylise"]["densified"]
     assert bool(grown) == (stylise_geometry == "on")
     unsplit = transfer(blob_scene(), stripes(), None, replace(config, split_size=0.0)).report["stylise"]["densified"]

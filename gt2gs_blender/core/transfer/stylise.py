@@ -103,6 +103,30 @@ def densifies(config: TransferConfig, moved_splats: bool) -> bool:
     return config.densify and (moved_splats or not split_by_layout)
 
 
+def schedule(config: TransferConfig, moved_splats: bool) -> list[tuple[str, int, bool]]:
+    """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct), or with ``nnfm_half``
+    ``rounds`` x (stylise, correct, nnfm, correct), each half with half the round's steps. Without the
+    GPB the stylise phases join, densifying (:func:`densifies`, given whether the splats move) over the same first
+    half of the rounds as with it, so that removing the GPB removes only the correction phases."""
+    rounds = max(1, config.rounds)
+    parts = 2 * rounds if config.nnfm_half else rounds
+    grows = densifies(config, moved_splats)
+    out: list[tuple[str, int, bool]] = []
+    for p in range(parts):
+        stylise = config.stylise_steps * (p + 1) // parts - config.stylise_steps * p // parts
+        kind = "nnfm" if config.nnfm_half and p % 2 else "stylise"
+        out.append((kind, stylise, grows and p * rounds // parts < math.ceil(rounds / 2)))
+        if config.gpb:
+            out.append(("correct", config.correct_steps * (p + 1) // parts - config.correct_steps * p // parts, False))
+    joined: list[tuple[str, int, bool]] = []
+    for phase in (p for p in out if p[1] > 0):
+        if joined and joined[-1][0] == phase[0] and joined[-1][2] == phase[2]:
+            joined[-1] = (phase[0], joined[-1][1] + phase[1], phase[2])
+        else:
+            joined.append(phase)
+    return joined
+
+
 def order_and_link(targets: list[ViewTargets], depths: list[torch.Tensor], alphas: list[torch.Tensor]) -> list[int]:
     """The GT² visiting order of the views; sets each visited view's prior link to its predecessor."""
     order = view_order([t.camera for t in targets])
@@ -193,28 +217,8 @@ class Styliser:
 
     # -- schedule ---------------------------------------------------------------------------------
     def phases(self) -> list[tuple[str, int, bool]]:
-        """(phase, steps, densify) in run order: ``rounds`` x (stylise, correct), or with ``nnfm_half``
-        ``rounds`` x (stylise, correct, nnfm, correct), each half with half the round's steps. Without the
-        GPB the stylise phases join, densifying over the same first half of the rounds as with it, so
-        that removing the GPB removes only the correction phases."""
-        cfg = self.config
-        rounds = max(1, cfg.rounds)
-        parts = 2 * rounds if cfg.nnfm_half else rounds
-        out: list[tuple[str, int, bool]] = []
-        for p in range(parts):
-            stylise = cfg.stylise_steps * (p + 1) // parts - cfg.stylise_steps * p // parts
-            kind = "nnfm" if cfg.nnfm_half and p % 2 else "stylise"
-            grows = densifies(cfg, self.report.moved_splats) and p * rounds // parts < math.ceil(rounds / 2)
-            out.append((kind, stylise, grows))
-            if cfg.gpb:
-                out.append(("correct", cfg.correct_steps * (p + 1) // parts - cfg.correct_steps * p // parts, False))
-        joined: list[tuple[str, int, bool]] = []
-        for phase in (p for p in out if p[1] > 0):
-            if joined and joined[-1][0] == phase[0] and joined[-1][2] == phase[2]:
-                joined[-1] = (phase[0], joined[-1][1] + phase[1], phase[2])
-            else:
-                joined.append(phase)
-        return joined
+        """This run's :func:`schedule`."""
+        return schedule(self.config, self.report.moved_splats)
 
     # -- stylise ----------------------------------------------------------------------------------
     def stylise_step(self, densify: bool, nnfm: bool = False) -> tuple[float, torch.Tensor]:
