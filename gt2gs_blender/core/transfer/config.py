@@ -464,6 +464,17 @@ def setting_type(name: str) -> type:
 _HINTS = get_type_hints(TransferConfig)
 
 
+def splits_first(config: TransferConfig) -> bool:
+    """Whether the layout splits coarse splats to the texture's detail before the optimisation (Split Before
+    Refining)."""
+    return config.layout and config.split_first and config.split_size > 0
+
+
+def splits_last(config: TransferConfig) -> bool:
+    """Whether the layout splits them after the optimisation instead."""
+    return config.layout and config.split_size > 0 and not config.split_first
+
+
 def keeps_scene(config: TransferConfig) -> bool:
     """Whether the laid-out texture keeps anything of the scene under it (its light and dark, colour or brightness)."""
     return config.keep_scene > 0 or config.scene_colour > 0 or config.scene_brightness > 0

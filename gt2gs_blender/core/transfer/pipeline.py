@@ -26,7 +26,7 @@ from ..render import resolve_backend
 from ..scene.gaussians import GaussianScene
 from . import color_transfer
 from .bank import build_bank, nnfm_bank
-from .config import TransferConfig, keeps_scene
+from .config import TransferConfig, keeps_scene, splits_first, splits_last
 from .content import content_degree
 from .detail import add_detail, split_for_detail
 from .layout import bright_images, lay_out, layout_bright, layout_images, layout_shading, shade_width
@@ -192,10 +192,10 @@ def _transfer(
     n_work = len(work)
     laid_out = start_view = None
     if frame is not None and config.layout:
-        if config.split_first and config.split_size > 0:
+        if splits_first(config):
             work, region, shade = split_for_detail(work, region, shade, frame, config)
         work = lay_out(work, region, plan.content, image, frame, config, shade)
-        if config.evaluate and (config.split_first or config.split_size <= 0):
+        if config.evaluate and not splits_last(config):
             # the run's start as the orientation preview shows it, kept for preview_ssim (no second layout)
             start = assemble(work, region, plan.start, plan.selected, plan.hidden, changed=True)
             start_view = first_view(plan, start, _side(plan.cameras[0]))
@@ -238,7 +238,7 @@ def _transfer(
 
     tracker.begin("finish")
     restyled = None if frozen is None else ~frozen
-    if config.layout and config.split_size > 0 and not config.split_first:
+    if splits_last(config):
         n_optimised = len(work)
         start_colours, shade = attached[COLOR_ATTACHMENT], attached.get(SHADE_ATTACHMENT)
         work, restyled = add_detail(work, start_colours, restyled, plan.content, image, frame, config, shade)

@@ -39,7 +39,7 @@ from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, dens
 from ..train.optim import GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
-from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig
+from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig, splits_first
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
 from .losses import anisotropy, content_loss, cosine_distance, layout_loss, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
@@ -99,8 +99,7 @@ def densifies(config: TransferConfig, moved_splats: bool) -> bool:
     has already split to the texture's detail. There a clone would sit on its parent for good, and 3DGS's split
     (children drawn at random from a long splat) reshapes the capture: the guitar kept 0.02-0.03 less of itself
     over its pixels, and no texture was found more."""
-    split_by_layout = config.layout and config.split_first and config.split_size > 0
-    return config.densify and (moved_splats or not split_by_layout)
+    return config.densify and (moved_splats or not splits_first(config))
 
 
 def schedule(config: TransferConfig, moved_splats: bool) -> list[tuple[str, int, bool]]:
