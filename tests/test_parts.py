@@ -24,22 +24,24 @@ def box(rng: np.random.Generator, lo: list[float], hi: list[float], rgb: list[fl
     return points, colours
 
 
-def scene_of(*boxes: tuple[np.ndarray, np.ndarray]) -> GaussianScene:
-    points = torch.tensor(np.concatenate([b[0] for b in boxes]), dtype=torch.float32)
+def scene_of(*boxes: tuple[np.ndarray, np.ndarray], units: float = 1.0) -> GaussianScene:
+    """The boxes' splats, every length times ``units``."""
+    points = torch.tensor(np.concatenate([b[0] for b in boxes]) * units, dtype=torch.float32)
     colours = torch.tensor(np.concatenate([b[1] for b in boxes]), dtype=torch.float32)
     n = len(points)
     return GaussianScene.from_activated(
-        means=points, scales=torch.full((n, 3), 0.01), opacities=torch.full((n,), 0.9), colors=colours
+        means=points, scales=torch.full((n, 3), 0.01 * units), opacities=torch.full((n,), 0.9), colors=colours
     )
 
 
-def test_two_touching_objects_of_unlike_colour_are_two_parts() -> None:
+@pytest.mark.parametrize("units", [1.0, 100.0, 0.01])
+def test_two_touching_objects_of_unlike_colour_are_two_parts(units: float) -> None:
     """A dark stand touching a light body (boxes sharing a face): two parts, each holding exactly its box's splats,
-    the larger first, with its colour."""
+    the larger first, with its colour, whatever units the capture is in."""
     rng = np.random.default_rng(0)
     body = box(rng, [0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [0.85, 0.7, 0.4], 6000)
     stand = box(rng, [0.0, 0.0, -0.5], [1.0, 1.0, 0.0], [0.08, 0.08, 0.1], 3000)
-    parts = find_parts(scene_of(body, stand))
+    parts = find_parts(scene_of(body, stand, units=units))
     assert len(parts) == 2
     np.testing.assert_array_equal(parts.labels, np.r_[np.zeros(6000, int), np.ones(3000, int)])
     np.testing.assert_allclose(parts.colours[0], [0.85, 0.7, 0.4], atol=0.02)
