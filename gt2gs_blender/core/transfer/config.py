@@ -310,7 +310,8 @@ class TransferConfig(SpeedSettings):
         True,
         "Densify",
         "Add splats where the texture needs detail (split coarse ones, copy small ones). A copy helps only while "
-        "Texture Moves Splats is on; with it off none is made, and none is added after Split Before Refining",
+        "Texture Moves Splats is on, so with it off none is made; with it off and Split Before Refining on, no "
+        "splat is added at all",
         "stylise",
     )
     densify_every: int = setting(
