@@ -1,15 +1,15 @@
 """One texture transfer, timed: a scene x texture x preset -> seconds per stage, peak MiB, quality.
 
-``python bench/transfer.py [--preset fast] [--set key=value ...] [--profile] [--warm-bank]`` runs the
-shared donut with the herringbone-wood photo by default, prints a table and writes
-bench/out/transfer_<preset>.json. ``--backends cpu,numba,torch [--rounds R]`` runs the transfer once per
-rasterizer backend, the backends interleaved, R rounds, in this one process, and adds a table of their
-times side by side with each one's median ratio to the first backend's time in the same round.
-The texture bank is built into a fresh cache unless
-``--warm-bank`` (so the time is end to end: weights, bank, colour transfer, stylisation, GPB,
-metrics). ``--profile`` runs under cProfile and splits the time into render forward/backward, VGG
-forward, the other backward (VGG and losses), matching, the optimiser and the correct phases. Timings
-on a shared machine are noisy: the load average is printed and stored beside them.
+``python bench/transfer.py [--preset fast] [--set key=value ...] [--profile] [--warm-bank]`` runs the shared
+donut with the herringbone-wood photo by default, prints a table and writes bench/out/transfer_<preset>.json.
+``--tile K`` lays K copies of the scene side by side across its two widest axes, a capture of millions of
+splats made of a real one (the robot x 6: 3,000,000). ``--backends cpu,numba,torch [--rounds R]`` runs the
+transfer once per rasterizer backend, the backends interleaved, R rounds, in this one process, and adds a
+table of their times side by side with each one's median ratio to the first backend's time in the same round.
+The texture bank is built into a fresh cache unless ``--warm-bank`` (so the time is end to end: weights, bank,
+colour transfer, stylisation, GPB, metrics). ``--profile`` runs under cProfile and splits the time into render
+forward/backward, VGG forward, the other backward (VGG and losses), matching, the optimiser and the correct
+phases. Timings on a shared machine are noisy: the load average is printed and stored beside them.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import cProfile
 import json
+import math
 import os
 import pstats
 import statistics
@@ -26,11 +27,14 @@ import time
 from pathlib import Path
 from typing import Any
 
+import torch
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.common import parse_overrides
 from gt2gs_blender.core.scene.files import read_scene
+from gt2gs_blender.core.scene.gaussians import GaussianScene, concat
 from gt2gs_blender.core.transfer.metrics import peak_memory_mib
 from gt2gs_blender.core.transfer.pipeline import transfer
 from gt2gs_blender.core.transfer.presets import preset
@@ -101,7 +105,7 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | No
     config = preset(args.preset, weights_path=str(args.weights), **overrides)
     if cache_dir is not None:
         config = config.with_overrides(cache_dir=cache_dir)
-    scene = read_scene(args.scene)
+    scene = tiled(read_scene(args.scene), args.tile)
     load_before = os.getloadavg()
     profiler = cProfile.Profile() if args.profile else None
     start = time.perf_counter()
@@ -135,6 +139,23 @@ def run(args: argparse.Namespace, overrides: dict[str, Any], cache_dir: str | No
     if profiler is not None:
         record["profile"] = profile_rows(pstats.Stats(profiler))
     return record
+
+
+def tiled(scene: GaussianScene, copies: int) -> GaussianScene:
+    """``copies`` of ``scene`` in a near-square grid across its two widest axes, a tenth of its width apart."""
+    if copies <= 1:
+        return scene
+    low, high = scene.bounds(0.99)
+    extent = (high - low).detach()
+    wide = torch.argsort(extent, descending=True)[:2].tolist()
+    columns = math.ceil(math.sqrt(copies))
+    copied = []
+    for k in range(copies):
+        offset = torch.zeros(3, dtype=scene.dtype, device=scene.device)
+        offset[wide[0]] = 1.1 * extent[wide[0]] * (k % columns)
+        offset[wide[1]] = 1.1 * extent[wide[1]] * (k // columns)
+        copied.append(GaussianScene(**{**scene.tensors(), "means": scene.means + offset}))
+    return concat(copied)
 
 
 def print_record(record: dict[str, Any]) -> None:
@@ -172,6 +193,7 @@ def main() -> None:
         help="TransferConfig settings over the preset",
     )
     parser.add_argument("--profile", action="store_true", help="split the time by component (cProfile)")
+    parser.add_argument("--tile", type=int, default=1, help="K copies of the scene side by side (a larger capture)")
     parser.add_argument("--warm-bank", action="store_true", help="use the user's bank cache (not end to end)")
     parser.add_argument("--json", type=Path, help="default bench/out/transfer_<preset>.json")
     parser.add_argument("--backends", help="comma-separated rasterizer backends to run side by side (e.g. cpu,numba)")
