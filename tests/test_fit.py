@@ -115,6 +115,26 @@ def test_non_finite_loss_or_gradient_skips_the_step():
     assert opt.step(loss=torch.tensor(1.0)) and opt.steps == 1
 
 
+def test_at_rest_until_a_gradient_gives_momentum_to_a_trained_tensor():
+    """A step with no gradient moves nothing exactly while every trained tensor's first moment is zero, and only
+    then: ``at_rest`` is what lets a caller take such a step without computing its gradient."""
+    opt = GaussianAdam(random_scene(6), dict.fromkeys(PARAM_NAMES, 1e-2))
+    before = {k: v.detach().clone() for k, v in opt.scene.tensors().items()}
+    assert opt.at_rest()
+    assert opt.step(loss=torch.tensor(0.5)) and opt.at_rest() and opt.steps == 1
+    for name, t in opt.scene.tensors().items():
+        assert torch.equal(t.detach(), before[name]), name
+    opt.set_trainable({"sh_dc"})
+    opt.scene.sh_dc.grad = torch.zeros_like(opt.scene.sh_dc)
+    opt.scene.sh_dc.grad[3, 0] = 1e-3
+    assert opt.step() and not opt.at_rest()
+    opt.zero_grad()
+    moved = opt.scene.sh_dc.detach().clone()
+    assert opt.step() and not torch.equal(opt.scene.sh_dc.detach(), moved)  # momentum moves it without a gradient
+    opt.set_trainable({"means", "log_scales"})  # the colour's momentum is not theirs
+    assert opt.at_rest()
+
+
 def test_only_trainable_tensors_change():
     target = random_scene(40, seed=1)
     cameras = views(4)

@@ -16,6 +16,7 @@ from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.weights import ResolvedWeights
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
+from gt2gs_blender.core.train.optim import GaussianAdam
 from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.losses import anisotropy
 from gt2gs_blender.core.transfer.pipeline import transfer
@@ -171,6 +172,7 @@ def test_geometry_preservation_branch_pulls_perturbed_geometry_back():
     distance, image = errors()
     assert distance < 0.85 * start_distance and image < 0.7 * start_image
     assert torch.equal(styliser.scene.sh_dc, perturbed.sh_dc)  # the correction phase leaves colours alone
+    assert styliser.report.fitted_correct_steps == 0  # every step had geometry to move
 
 
 def front_capture(scene: GaussianScene, n: int) -> list[Camera]:
@@ -301,12 +303,13 @@ def test_full_schedule_reports_its_phases(tmp_path):
 
 
 def test_still_splats_are_redrawn_from_kept_weights_until_the_geometry_moves(tmp_path):
-    """Colour-only steps reuse each view's compositing weights within a stylise phase, never across a
-    correct phase or a densification, and optimise as full renders do (to float rounding)."""
+    """Colour-only steps reuse each view's compositing weights until the geometry moves (a correct step that moved
+    it, a densification), and optimise as full renders do (to float rounding)."""
     config = tiny(cache_dir=str(tmp_path), stylise_steps=12, correct_steps=4, rounds=2, gpb=True, plateau_window=0)
     on = transfer(blob_scene(), stripes(), None, config)
     off = transfer(blob_scene(), stripes(), None, replace(config, reuse_weights=False))
-    assert on.report["stylise"]["reused_weights"] == 12 - 2 * 3  # 2 phases of 6 steps, each view fresh once
+    assert on.report["stylise"]["fitted_correct_steps"] > 0  # the correct phases found nothing to move ...
+    assert on.report["stylise"]["reused_weights"] == 12 - 3  # ... so each of the 3 views is drawn fresh once
     assert off.report["stylise"]["reused_weights"] == 0
     torch.testing.assert_close(on.scene.sh_dc, off.scene.sh_dc, atol=1e-4, rtol=0)
     torch.testing.assert_close(on.scene.means, off.scene.means, atol=1e-5, rtol=0)
@@ -413,3 +416,41 @@ def test_correction_leaves_a_scene_that_fits_its_content_images_exactly_unchange
     run_corrections(styliser)
     for name in ("means", "quats", "log_scales", "opacity_logits"):
         assert torch.equal(getattr(styliser.scene, name).detach(), getattr(original, name)), name
+    assert styliser.report.fitted_correct_steps >= 30 - len(cameras)  # each view drawn once, then known to fit
+    assert styliser.opt.steps == 30  # every step was taken, as a drawn one with no gradient would be
+
+
+@pytest.mark.parametrize("stylise_geometry", ["off", "on"])
+def test_correct_steps_on_views_the_still_geometry_fits_end_as_drawn_ones_do(tmp_path, monkeypatch, stylise_geometry):
+    """A correct step on a view the unmoved geometry already fits is taken without drawing the view, and the run
+    ends bit for bit where drawing every step ends (the oracle: at_rest never true, so every step draws), with
+    the same losses reported; a run whose splats move never skips one."""
+    config = tiny(
+        cache_dir=str(tmp_path),
+        stylise_steps=12,
+        correct_steps=12,
+        rounds=2,
+        gpb=True,
+        plateau_window=0,
+        stylise_geometry=stylise_geometry,
+    )
+    losses: list[list[str]] = [[], []]
+
+    def run(into: list[str]):
+        return transfer(
+            blob_scene(),
+            stripes(),
+            None,
+            config,
+            progress=lambda p: into.append(p.message) if ":" in p.message else None,
+        )
+
+    skipping = run(losses[0])
+    monkeypatch.setattr(GaussianAdam, "at_rest", lambda self: False)
+    drawing = run(losses[1])
+    for name, t in skipping.scene.tensors().items():
+        assert torch.equal(t, drawing.scene.tensors()[name]), name
+    assert losses[0] == losses[1] and any("preserve geometry" in m for m in losses[0])
+    fitted = skipping.report["stylise"]["fitted_correct_steps"]
+    assert drawing.report["stylise"]["fitted_correct_steps"] == 0
+    assert fitted == 0 if stylise_geometry == "on" else fitted >= 12 - skipping.report["n_views"]

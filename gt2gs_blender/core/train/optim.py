@@ -154,6 +154,11 @@ class GaussianAdam:
         """Steps skipped because the loss, a gradient or an update was not finite."""
         return self.guard.skipped
 
+    def at_rest(self) -> bool:
+        """Whether a step with no gradient would move nothing: every trainable tensor's first moment is zero
+        (none has had a gradient yet, or it has decayed away)."""
+        return not any(bool(self.exp_avg[name].any()) for name in self._trained())
+
     def grads_finite(self) -> bool:
         """Whether every trainable tensor's gradient is finite (a missing gradient counts as zero)."""
         return all(t.grad is None or bool(torch.isfinite(t.grad).all()) for t in self._trained().values())
