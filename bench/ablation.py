@@ -1,7 +1,8 @@
 """The paper's ablation on our scenes: full GT²-GS vs no GT² loss (NNFM) vs no AFCM vs no GPB, same budget.
 
 ``python bench/ablation.py [--scenes donut fern] [--preset fast] [--steps N] [--sh-degree D] [--seeds S]
-[--elevation DEG] [--set KEY=VALUE ...] [--json PATH]`` prints a table of SSIM, short/long-range RMSE and
+[--elevation DEG] [--set KEY=VALUE ...] [--json PATH]`` prints a table of SSIM (the paper's, of the whole frame,
+and ``object_ssim``, over the object's pixels: how much of the scene is kept), short/long-range RMSE and
 LPIPS, texture match, coarse long-range RMSE, time and Gaussian count (with ``--seeds`` > 1 a row per seed,
 then each variant's mean and half-range), writes the records to bench/out/ablation.json (or PATH) and a PNG
 strip per scene beside them (texture, original, then each variant, 3 views; first seed). ``--set`` changes a
@@ -15,7 +16,7 @@ loss-plateau stop), so the budgets are equal: a variant without the GPB stylises
 comes at another step count. The donut uses 16 automatic orbit views (``--elevation DEG`` sets the orbit's
 elevation, default 20: at 60 the views 157 degrees apart share the donut's top, 20 % of the image instead of
 3 %, so long-range consistency weighs real surface); the fern is the shared LLFF capture fitted with the fit
-engine (``bench/fit_fern.py`` output, fitted here first when missing) seen from its own cameras. ``--video
+engine (the benchmarks' one cached fit, ``recognise_scenes.fern_fit_dir``) seen from its own cameras. ``--video
 K`` also measures consistency the peers' way (StyleGaussian, cited by the paper): on a rendered video, a
 smooth path with K frames between consecutive views (closed around the donut's orbit), frames i vs i+1
 (video_st) and i vs i+7 (video_lt), which on the donut's 16 views at K = 8 are 2.8 and 20 degrees apart
@@ -42,11 +43,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bench.common import parse_overrides
+from bench.recognise_scenes import fern_fit_dir
 from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.cameras.generate import auto_views, camera_path
 from gt2gs_blender.core.features.lpips import LPIPS, load_lpips
-from gt2gs_blender.core.fit.trainer import FitConfig, fit_llff
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.scene.ply import read_ply
@@ -71,15 +72,13 @@ SCENES = {
 }
 STRIP_VIEWS = 3
 TILE = 192
-METRICS = ("ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match", "lt_rmse_coarse")
+METRICS = ("ssim", "object_ssim", "st_rmse", "st_lpips", "lt_rmse", "lt_lpips", "texture_match", "lt_rmse_coarse")
 COARSE_SIGMA = 2.0
 """Pixels: the Gaussian blur before ``lt_rmse_coarse``, wider than a depth warp's misregistration across 157 degrees."""
 VIDEO_METRICS = ("video_st_rmse", "video_st_lpips", "video_lt_rmse", "video_lt_lpips")
 
 
-def load_scene(
-    name: str, fit_iterations: int, elevation: float | None = None
-) -> tuple[GaussianScene, list[Camera] | None]:
+def load_scene(name: str, elevation: float | None = None) -> tuple[GaussianScene, list[Camera] | None]:
     """The scene and its views (None = the transfer's automatic views; the donut's orbit at ``elevation``
     degrees when given: 16 views at 256 px, as the fast preset's own)."""
     if name == "donut":
@@ -87,10 +86,7 @@ def load_scene(
         return donut, None if elevation is None else auto_views(
             donut, 16, width=256, height=256, elevation_deg=elevation
         )
-    fitted = OUT / "fit_fern"
-    if not (fitted / "point_cloud.ply").is_file():
-        print(f"fitting the fern first ({fit_iterations} steps) into {fitted}", flush=True)
-        fit_llff(SHARED / "data" / "scenes" / "fern_llff", fitted, config=FitConfig(iterations=fit_iterations))
+    fitted = fern_fit_dir()
     return read_ply(fitted / "point_cloud.ply"), load_views(fitted / "cameras.json")
 
 
@@ -204,7 +200,6 @@ def main() -> None:
     parser.add_argument("--variants", nargs="+", choices=tuple(VARIANTS), default=list(VARIANTS))
     parser.add_argument("--preset", default="fast")
     parser.add_argument("--steps", type=int, help="stylise steps (default: the preset's)")
-    parser.add_argument("--fit-iterations", type=int, default=1500, help="fern fit steps when it must be fitted")
     parser.add_argument("--sh-degree", type=int, default=0, help="SH degree of the restyled colours (0-3)")
     parser.add_argument(
         "--video", type=int, default=0, metavar="K", help="also video consistency: K path frames per view gap (0 = off)"
@@ -235,7 +230,7 @@ def main() -> None:
     print(f"{'scene':<6} {'variant':<12} " + " ".join(f"{m:>13}" for m in metrics) + f" {'s':>6} {'N':>7}")
     for scene_name in args.scenes:
         texture_name, background = SCENES[scene_name]
-        scene, views = load_scene(scene_name, args.fit_iterations, args.elevation)
+        scene, views = load_scene(scene_name, args.elevation)
         texture = load_texture(SHARED / "data" / "textures" / texture_name)
         results = {"original": scene}
         video = (

@@ -55,7 +55,7 @@ CAPTURE_SCALE = 2
 SCENES = ("donut", "fern", *CAPTURES)
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gt2gs_blender" / "bench"
 FERN_FIT = {"iterations": 1500, "downscale": 8, "points": DEFAULT_POINTS, "sh_degree": DEFAULT_SH_DEGREE, "seed": 0}
-"""The fern's fit settings (1,500 steps, as bench/ablation.py fits it when missing: ~7 min on 2 cores)."""
+"""The fern's fit settings, shared by bench/recognise.py and bench/ablation.py (1,500 steps: ~7 min, once)."""
 HELD_OUT_ELEVATION = 40.0
 HELD_OUT_RING = 32
 HELD_OUT_DONUT = (1, 9, 17, 25)
