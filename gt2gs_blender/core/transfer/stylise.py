@@ -20,7 +20,7 @@ residuals under half a grey level, so geometry that already fits stays put) and 
 regulariser (tolerating each Gaussian's starting elongation), so what densification and the texture
 loss bent out of shape goes back. Where nothing did (a colour-only run: the splats neither move nor multiply), a
 view the geometry fits stays fitted, so after its first draw its correct steps are taken without drawing it,
-exactly as a drawn step with no gradient is (the donut's `fast` run: 134 of 150, 55 -> 29 s).
+exactly as a drawn step with no gradient is (the donut's `fast` run: 134 of 150, 56 -> 32 s).
 Gaussians outside the region never change (the optimiser's frozen rows).
 """
 
