@@ -360,8 +360,7 @@ class Styliser:
         cfg = self.config
         self.opt.set_trainable(GEOMETRY)
         v = int(torch.randint(len(self.views), (1,), generator=self.generator))
-        if v in self.fitted and self.opt.at_rest():
-            self.opt.zero_grad()
+        if v in self.fitted and self.opt.at_rest():  # set_trainable left no gradient: a step with none
             self._step(torch.tensor(self.fitted[v]))
             self.report.correct_steps += 1
             self.report.fitted_correct_steps += 1
