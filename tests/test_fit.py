@@ -135,6 +135,36 @@ def test_at_rest_until_a_gradient_gives_momentum_to_a_trained_tensor():
     assert opt.at_rest()
 
 
+def test_an_idle_step_is_a_step_without_a_gradient_bit_for_bit():
+    """``idle_step`` (what a caller takes while ``at_rest``) against ``step`` with no gradient, the oracle, from a
+    state with second moments to decay and frozen rows that keep theirs: the same tensors, moments and count."""
+    frozen = torch.zeros(8, dtype=torch.bool)
+    frozen[[1, 5]] = True
+    stepping = GaussianAdam(random_scene(8), dict.fromkeys(PARAM_NAMES, 1e-2), frozen=frozen)
+    for t in stepping.scene.tensors().values():
+        t.grad = torch.randn_like(t)
+    assert stepping.step(loss=torch.tensor(1.0))
+    stepping.zero_grad()
+    for name in PARAM_NAMES:
+        stepping.exp_avg[name].zero_()  # at rest, with second moments left ...
+        stepping.exp_avg_sq[name][frozen] = 0.5  # ... also on frozen rows, which keep theirs
+    stepping.set_trainable({"means", "log_scales", "quats", "opacity_logits"})
+    idle = GaussianAdam(stepping.scene, dict(stepping.lrs), trainable=stepping.trainable, frozen=frozen)
+    idle.exp_avg = {k: v.clone() for k, v in stepping.exp_avg.items()}
+    idle.exp_avg_sq = {k: v.clone() for k, v in stepping.exp_avg_sq.items()}
+    idle.steps = stepping.steps
+    assert stepping.at_rest() and idle.at_rest()
+    for _ in range(3):
+        assert stepping.step(loss=torch.tensor(0.25))
+        idle.idle_step()
+    assert idle.steps == stepping.steps == 4
+    for name, t in stepping.scene.tensors().items():
+        assert torch.equal(idle.scene.tensors()[name].detach(), t.detach()), name
+        assert torch.equal(idle.exp_avg[name], stepping.exp_avg[name]), name
+        assert torch.equal(idle.exp_avg_sq[name], stepping.exp_avg_sq[name]), name
+    assert not torch.equal(stepping.exp_avg_sq["means"][0], torch.zeros(3))  # decayed, not cleared
+
+
 def test_only_trainable_tensors_change():
     target = random_scene(40, seed=1)
     cameras = views(4)

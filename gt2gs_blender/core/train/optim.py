@@ -159,6 +159,20 @@ class GaussianAdam:
         (none has had a gradient yet, or it has decayed away)."""
         return not any(bool(self.exp_avg[name].any()) for name in self._trained())
 
+    def idle_step(self) -> None:
+        """What :meth:`step` does with no gradient while :meth:`at_rest`, without its arithmetic on every value:
+        nothing moves, the second moments decay and the step counts in the bias correction (bit for bit)."""
+        b2 = self.betas[1]
+        keep_frozen = bool(self.frozen.any())
+        with torch.no_grad():
+            for name, param in self._trained().items():
+                v = self.exp_avg_sq[name] * b2
+                if keep_frozen:
+                    v = torch.where(rows_like(~self.frozen, param), v, self.exp_avg_sq[name])
+                self.exp_avg_sq[name] = v
+        self.guard.consecutive = 0
+        self.steps += 1
+
     def grads_finite(self) -> bool:
         """Whether every trainable tensor's gradient is finite (a missing gradient counts as zero)."""
         return all(t.grad is None or bool(torch.isfinite(t.grad).all()) for t in self._trained().values())

@@ -361,7 +361,7 @@ class Styliser:
         self.opt.set_trainable(GEOMETRY)
         v = int(torch.randint(len(self.views), (1,), generator=self.generator))
         if v in self.fitted and self.opt.at_rest():  # set_trainable left no gradient: a step with none
-            self._step(torch.tensor(self.fitted[v]))
+            self.opt.idle_step()
             self.report.correct_steps += 1
             self.report.fitted_correct_steps += 1
             return self.fitted[v]
@@ -381,12 +381,13 @@ class Styliser:
         )
         loss.backward()
         self._step(loss)
-        if self.opt.at_rest():  # no gradient and no momentum: nothing moved, and view v fits
-            self.fitted[v] = float(loss.detach())
+        value = float(loss.detach())
+        if self.opt.at_rest() and math.isfinite(value):  # no gradient and no momentum: nothing moved, v fits
+            self.fitted[v] = value
         else:
             self._geometry_moved()
         self.report.correct_steps += 1
-        return float(loss.detach())
+        return value
 
     def _geometry_moved(self) -> None:
         """Forget what held only for the geometry as it was: each view's compositing weights and which views fit."""
