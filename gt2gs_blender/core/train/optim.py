@@ -170,7 +170,7 @@ class GaussianAdam:
                 if keep_frozen:
                     v = torch.where(rows_like(~self.frozen, param), v, self.exp_avg_sq[name])
                 self.exp_avg_sq[name] = v
-        self.guard.consecutive = 0
+        self.guard.allow(None, {})  # a taken step: ends a run of skipped ones, as step's does
         self.steps += 1
 
     def grads_finite(self) -> bool:
