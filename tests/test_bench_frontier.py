@@ -48,7 +48,8 @@ def test_a_lever_point_counts_textures_top_3_under_both_and_averages_every_rank(
     point = lever_point(path, "donut")
     assert point["textures"] == 3 and point["found"] == 2
     assert point["mean_rank"] == pytest.approx((1 + 3 + 2 + 4 + 3 + 3) / 6)
-    assert point["content"] == pytest.approx(0.6) and point["seconds"] == [30.0, 34.0]
+    assert point["content"] == pytest.approx(0.6) and point["content_min"] == pytest.approx(0.5)
+    assert point["seconds"] == [30.0, 34.0]
     refs = reference_points(path, "donut")
     assert set(refs) == {"layout-surface", "original"}
     assert refs["layout-surface"]["found"] == 1 and refs["layout-surface"]["seconds"] is None
