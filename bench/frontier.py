@@ -1,6 +1,7 @@
 """Issue 37's frontier: what one setting trades between the scene a result keeps and the texture the measure finds.
 
-``python bench/frontier.py --lever keep_scene --runs 0=TAG 0.3=TAG ... [--default 0.85] [--scenes donut fern]``
+``python bench/frontier.py --lever keep_scene --runs 0=TAG 0.3=TAG ... [--default 0.85] [--scenes donut fern]
+[--name NAME]``
 
 Each ``VALUE=TAG`` names a ``bench/recognise.py`` output (``bench/out/recognise/<TAG>.json``, ``{scene}`` in a tag is
 replaced by each scene's name) run with the lever at that value and everything else at the default. Per scene and
@@ -12,8 +13,8 @@ splats, nothing of the scene kept, the measure's ceiling for a texture laid on t
 (``layout-target``), its start (``layout-start``), the texture projected flat in screen space (``projected-64``)
 and the untouched scene.
 
-Nothing here runs a transfer. Prints a table, writes bench/out/frontier_<lever>.json and .png (one panel per
-scene: content across, mean rank up, the lever's values joined in order).
+Nothing here runs a transfer. Prints a table, writes bench/out/<NAME>.json and .png (``frontier_<lever>`` unless
+named; one panel per scene: content across, mean rank up, the lever's values joined in order).
 """
 
 from __future__ import annotations
@@ -133,6 +134,7 @@ def main() -> None:
     parser.add_argument("--runs", nargs="+", required=True, metavar="VALUE=TAG", help="in the lever's order")
     parser.add_argument("--default", help="the lever's default value (drawn bold); its run gives the references")
     parser.add_argument("--scenes", nargs="+", default=["donut", "fern"])
+    parser.add_argument("--name", help="output name under bench/out (default: frontier_<lever>)")
     args = parser.parse_args()
     runs = dict(pair.split("=", 1) for pair in args.runs)
     reference_tag = runs.get(args.default, next(iter(runs.values())))
@@ -141,7 +143,7 @@ def main() -> None:
     }
     references = {s: reference_points(OUT / f"{reference_tag.format(scene=s)}.json", s) for s in args.scenes}
     print_table(args.lever, points, references)
-    stem = OUT.parent / f"frontier_{args.lever}"
+    stem = OUT.parent / (args.name or f"frontier_{args.lever}")
     stem.with_suffix(".json").write_text(
         json.dumps(
             {"lever": args.lever, "runs": runs, "default": args.default, "points": points, "references": references},
