@@ -32,7 +32,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from recognise import MEASURES, OUT, TOP, is_transfer
+from recognise import MEASURES, OUT, TOP, is_transfer, summarise
 
 REFERENCES = {
     "layout-surface": "texture alone on the exact surface",
@@ -48,15 +48,17 @@ CONTENT_NEEDED = {"fern": 0.51}
 
 def summary(rows: list[dict]) -> dict[str, Any]:
     """Found count, mean rank over both measures, mean and least content (the texture that keeps the least of the
-    scene: a default must keep every texture's scene, not only the mean) and seconds of one variant's rows."""
-    ranks = [r[f"{m}_rank"] for r in rows for m in MEASURES]
+    scene: a default must keep every texture's scene, not only the mean) and seconds of one variant's rows, found
+    and content as ``bench/recognise.py`` summarises them."""
+    (variants,) = summarise(rows).values()
+    (counted,) = variants.values()
     seconds = [r["seconds"] for r in rows if r.get("seconds") is not None]
     return {
-        "textures": len(rows),
-        "found": sum(all(r[f"{m}_rank"] <= TOP for m in MEASURES) for r in rows),
-        "mean_rank": mean(ranks),
-        "content": mean(r["content_ssim"] for r in rows),
-        "content_min": min(r["content_ssim"] for r in rows),
+        "textures": counted["n"],
+        "found": counted[f"top{TOP}_both"],
+        "mean_rank": mean(r[f"{m}_rank"] for r in rows for m in MEASURES),
+        "content": counted["mean_content_ssim"],
+        "content_min": counted["least_content_ssim"],
         "seconds": [min(seconds), max(seconds)] if seconds else None,
     }
 
