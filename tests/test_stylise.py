@@ -320,6 +320,18 @@ def test_still_splats_are_redrawn_from_kept_weights_until_the_geometry_moves(tmp
     assert densified.report["stylise"]["reused_weights"] == 6 - 3  # none in the densifying first phase
 
 
+def test_features_near_splats_leave_the_empty_view_out_and_optimise_as_whole_views_do(tmp_path):
+    """A thin upright object leaves most of each view empty: the feature network runs on the part near its splats
+    only (*Features Near Splats*), and the run ends where whole-view features take it (to float rounding)."""
+    scene = blob_scene()
+    scene = replace(scene, means=scene.means * torch.tensor([0.06, 1.0, 0.06]))
+    config = tiny(cache_dir=str(tmp_path), resolution=256, stylise_steps=8, plateau_window=0)
+    on = transfer(scene, stripes(), None, config)
+    off = transfer(scene, stripes(), None, replace(config, feature_window=False))
+    assert on.report["stylise"]["feature_area"] < 0.85 and off.report["stylise"]["feature_area"] == 1.0
+    torch.testing.assert_close(on.scene.sh_dc, off.scene.sh_dc, atol=1e-4, rtol=0)
+
+
 def dominant_orientation(image: np.ndarray) -> float:
     """Structure-tensor orientation (degrees in [0, 180)) of the image's gradients, on the grey image."""
     gray = image.mean(axis=-1)

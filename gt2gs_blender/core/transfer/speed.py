@@ -70,6 +70,13 @@ class SpeedSettings(MachineSettings):
         "(same result, faster)",
         "speed",
     )
+    feature_window: bool = setting(
+        True,
+        "Features Near Splats",
+        "Run the feature network only on the part of each view near the splats and reuse the empty backdrop's "
+        "features elsewhere (same result, faster on an object that leaves much of the view empty)",
+        "speed",
+    )
     plateau_window: int = setting(
         16,
         "Plateau Window",

@@ -35,6 +35,7 @@ import torch
 from ..cameras.camera import Camera, camera_extent
 from ..cameras.spread import cameras_from_front
 from ..features.extractor import FeatureExtractor
+from ..features.window import plain_features, windowed_features
 from ..render import FixedGeometry, RenderOutput, fix_geometry, render
 from ..scene.gaussians import GaussianScene
 from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, densify_due
@@ -89,6 +90,7 @@ class StyliseStats:
     plateau_skipped: dict[str, int] = field(default_factory=dict)  # steps left out at a loss plateau, per phase
     reused_weights: int = 0  # stylise steps drawn from compositing weights kept from an earlier step
     fitted_correct_steps: int = 0  # correct steps on a view the unmoved geometry already fits: stepped, not drawn
+    feature_area: float = 1.0  # mean share of a stylise step's view the feature network ran on (Features Near Splats)
 
 
 def moves_splats(cameras: list[Camera], choice: str) -> bool:
@@ -199,6 +201,7 @@ class Styliser:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.kept: dict[int, FixedGeometry] = {}
         self.fitted: dict[int, float] = {}
+        self.plain: dict[int, torch.Tensor] = {}  # per view, the empty backdrop's features (Features Near Splats)
 
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
@@ -234,7 +237,8 @@ class Styliser:
         self.opt.set_trainable(self.colors + GEOMETRY if self.report.moved_splats else self.colors)
         out = self._stylise_render(v, view)
         image = out.colors[0]
-        feats = self.extractor(image.permute(2, 0, 1)[None])
+        feats, area = self._features(v, view, image, out.alphas[0].detach())
+        self.report.feature_area += (area - self.report.feature_area) / (self.report.stylise_steps + 1)
         style = self._texture_loss(feats[0], v, view, nnfm) if cfg.lambda_style > 0 else None
         loss = (
             (0.0 if style is None else cfg.lambda_style * style)
@@ -293,6 +297,23 @@ class Styliser:
         if fixed is None:
             return render(self.scene, [view.camera], background=view.backdrop, backend=cfg.backend, render_depth=False)
         return fixed.render(self.scene, background=view.backdrop)
+
+    def _features(
+        self, v: int, view: ViewTargets, image: torch.Tensor, alpha: torch.Tensor
+    ) -> tuple[torch.Tensor, float]:
+        """VGG features of view ``v``'s render ``image`` (H,W,3) over its backdrop, and the share of the view the
+        network ran on: with *Features Near Splats* only near the splats (``alpha`` > 0, H,W), the empty backdrop's
+        features filling the rest."""
+        images = image.permute(2, 0, 1)[None]
+        if not self.config.feature_window:
+            return self.extractor(images), 1.0
+
+        def plain() -> torch.Tensor:
+            if v not in self.plain:
+                self.plain[v] = plain_features(self.extractor, image.shape[0], image.shape[1], view.backdrop)
+            return self.plain[v]
+
+        return windowed_features(self.extractor, images, alpha, plain)
 
     def _texture_loss(self, feats: torch.Tensor, v: int, view: ViewTargets, nnfm: bool) -> torch.Tensor:
         """The texture loss of view ``v``: the AFCM-weighted distance to the matched targets over its covered

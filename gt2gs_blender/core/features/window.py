@@ -1,0 +1,63 @@
+"""Features of an image that is a plain backdrop except inside a window (an object over its backdrop): the network
+runs only on the crop whose cells the window's pixels can reach; every other cell is the plain backdrop's.
+
+Exact up to the convolutions' rounding: a cell reads only the pixels of its span (``FeatureSpec.cell_reach``), so a
+cell no changed pixel reaches reads the same backdrop as in the plain image, and a reached cell's span stays inside
+the crop (or meets the image's own border there), so it reads what it reads in the whole image. The crop starts on
+the network's stride and spans whole strides, so its cells lie on the image's grid."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import torch
+
+from .extractor import FeatureExtractor, resize
+
+
+def reached_cells(lo: int, hi: int, size: int, stride: int, reach: tuple[int, int]) -> tuple[int, int, int, int]:
+    """Along one axis of a network input ``size`` pixels long (a multiple of ``stride``) whose pixels ``lo``..``hi``
+    differ from the backdrop: the first and last cell those pixels reach, and the crop (start, stop pixels, multiples
+    of ``stride``) inside which those cells read just what they read in the whole input."""
+    before, after = reach
+    first = max(0, math.ceil((lo - after) / stride))
+    last = min(size // stride - 1, math.floor((hi - before) / stride))
+    start = max(0, (stride * first + before) // stride * stride)
+    stop = min(size, math.ceil((stride * last + after + 1) / stride) * stride)
+    return first, last, start, stop
+
+
+def plain_features(extractor: FeatureExtractor, height: int, width: int, backdrop: torch.Tensor) -> torch.Tensor:
+    """(1,C,h,w) features of a ``height`` x ``width`` image of the plain ``backdrop`` colour (3,)."""
+    image = backdrop.reshape(1, 3, 1, 1).expand(1, 3, height, width)
+    with torch.no_grad():
+        return extractor(image.contiguous())
+
+
+def windowed_features(
+    extractor: FeatureExtractor, images: torch.Tensor, coverage: torch.Tensor, plain: Callable[[], torch.Tensor]
+) -> tuple[torch.Tensor, float]:
+    """``extractor(images)`` for (1,3,H,W) images that are the backdrop wherever ``coverage`` (H,W) is 0, from
+    ``plain()`` (:func:`plain_features` of that backdrop at this size, asked for only when some cell is left out) and
+    the network run on the covered window only; and the share of the network input it ran on. The whole image where
+    the window is all of it, or where its network input is not whole strides (the crop's grid would shift)."""
+    x = extractor.network_input(images)
+    height, width = x.shape[-2:]
+    stride = extractor.spec.stride
+    if height % stride or width % stride:
+        return extractor.network(x), 1.0
+    covered = resize(coverage.to(x.dtype)[None, None], (height, width))[0, 0] > 0
+    rows, cols = covered.any(dim=1).nonzero().squeeze(1), covered.any(dim=0).nonzero().squeeze(1)
+    if len(rows) == 0:
+        return plain(), 0.0
+    reach = extractor.spec.cell_reach()
+    top, bottom, y0, y1 = reached_cells(int(rows[0]), int(rows[-1]), height, stride, reach)
+    left, right, x0, x1 = reached_cells(int(cols[0]), int(cols[-1]), width, stride, reach)
+    if (y0, y1, x0, x1) == (0, height, 0, width):  # the splats reach every cell: nothing to leave out
+        return extractor.network(x), 1.0
+    inner = extractor.network(x[..., y0:y1, x0:x1])
+    cells = inner[..., top - y0 // stride : bottom - y0 // stride + 1, left - x0 // stride : right - x0 // stride + 1]
+    out = plain().clone()
+    out[..., top : bottom + 1, left : right + 1] = cells
+    return out, (y1 - y0) * (x1 - x0) / (height * width)
