@@ -75,6 +75,12 @@ SKIPS: dict[str, tuple[str, dict[str, Any], dict[str, Any], Path]] = {
         {"reuse_weights": False},
         HERRINGBONE,
     ),
+    "window": (
+        "VGG run only near the splats, the backdrop's features elsewhere",
+        {"feature_window": True},
+        {"feature_window": False},
+        HERRINGBONE,
+    ),
     "caches": ("bank on disk + content renders reused (2nd run)", {}, {}, HERRINGBONE),
 }
 
