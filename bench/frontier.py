@@ -48,8 +48,8 @@ CONTENT_NEEDED = {"fern": 0.51}
 
 def summary(rows: list[dict]) -> dict[str, Any]:
     """Found count, mean rank over both measures, mean and least content (the texture that keeps the least of the
-    scene: a default must keep every texture's scene, not only the mean) and seconds of one variant's rows, found
-    and content as ``bench/recognise.py`` summarises them."""
+    scene, which the mean hides) and seconds of one variant's rows, found and content as ``bench/recognise.py``
+    summarises them."""
     (variants,) = summarise(rows).values()
     (counted,) = variants.values()
     seconds = [r["seconds"] for r in rows if r.get("seconds") is not None]

@@ -468,7 +468,7 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
             for key in [k for k in s if k.endswith("_values")]:
                 values = s.pop(key)
                 s[f"mean_{key.removesuffix('_values')}"] = float(np.nanmean(values))
-                if key == "content_ssim_values":  # a default has to keep the scene under every texture
+                if key == "content_ssim_values":  # the texture that keeps the least of the scene, hidden by the mean
                     s["least_content_ssim"] = float(np.nanmin(values))
     return out
 
