@@ -181,6 +181,26 @@ def test_layout_lays_the_texture_at_its_repeat_and_angle(angle):
     assert across.std() < 0.1 * along.std()  # constant along the bars
 
 
+@pytest.mark.parametrize("projection", ["box", "view"])
+def test_a_moved_capture_gets_the_same_layout(projection):
+    """The texture lies on the object, not on the world's origin: the wall and its view moved far away (a
+    capture with another origin) read the same colours, splat for splat (anchored at the origin, the box's
+    bars moved with the world by a third of a period)."""
+    texture = stripes(period=32, size=128)
+    offset = np.array([1000.3, -700.1, 512.7])
+    colours = []
+    for shift in (np.zeros(3), offset):
+        scene = wall(n=60, tilt_deg=20.0)
+        scene.means = scene.means + torch.from_numpy(shift).float()
+        cam = Camera.from_cam_to_world(np.eye(3), shift, 86.4, 86.4, 48.0, 48.0, 96, 96)
+        views = render_views(scene, [cam], torch.ones(3), "auto")
+        frame = layout_frame(scene, views, TransferConfig(texture_repeats=2.0, layout_projection=projection))
+        normals = surface_normals(scene, [cam], views.depths, views.alphas)
+        colours.append(layout_colours(scene, normals, texture, frame, 30.0))
+    assert float(colours[0].std(0).mean()) > 0.2  # the bars are there to move
+    torch.testing.assert_close(colours[1], colours[0], atol=0.02, rtol=0.0)
+
+
 @pytest.mark.parametrize("tilt", [0.0, 60.0])
 def test_the_view_projection_shows_the_texture_as_the_first_view_does(tilt):
     """Thrown from the first view, the bars keep their on-screen period on a wall however steeply it is

@@ -6,7 +6,9 @@ scale and orientation: one texture size in the world whatever the view's depth, 
 every view agrees on.
 - Frame: ``up`` is the views' mean up direction (an orbit's world up, a capture's camera up);
   ``right`` the first view's right made orthogonal to it; ``depth`` completes the frame. A surface
-  facing ``depth`` shows the texture as the first view shows it, rotated by the start angle.
+  facing ``depth`` shows the texture as the first view shows it, rotated by the start angle. The box
+  is anchored at the object's middle (its splats' median), not the world's origin: the same capture
+  moved elsewhere gets the same texture, and far from the origin its texture coordinates stay precise.
 - Size: the texture's height spans ``object size / repeats`` in the world, the object's size being
   what the first view sees of it (its covered pixels' box at their median depth).
 - Projection (``layout_projection``): the box suits an object seen from all sides. A capture seen from
@@ -34,7 +36,7 @@ every view agrees on.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import get_args
 
 import cv2
@@ -97,11 +99,13 @@ class Projector:
 @dataclass(frozen=True)
 class LayoutFrame:
     """The projection's axes (rows: right, up, depth), the world size of one texture height (at the
-    nearest depth group for the view projection) and the view projection's projector (None: the box)."""
+    nearest depth group for the view projection), the view projection's projector (None: the box) and the
+    box's origin in the world."""
 
     axes: np.ndarray
     repeat: float
     projector: Projector | None = None
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -> LayoutFrame:
@@ -126,7 +130,13 @@ def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -
     else:
         repeat = _seen_size(scene, cameras[0], config.backend) / config.texture_repeats
     projector = _projector(views, config) if projection(cameras, config.layout_projection) == "view" else None
-    return LayoutFrame(axes=axes, repeat=repeat, projector=projector)
+    return LayoutFrame(axes=axes, repeat=repeat, projector=projector, origin=object_middle(scene))
+
+
+def object_middle(scene: GaussianScene) -> np.ndarray:
+    """(3,) the box projection's origin: the median of the splats' centres, so the texture lies on the object
+    alike wherever its capture put the world's origin (a georeferenced capture far from it included)."""
+    return scene.means.detach().double().median(dim=0).values.cpu().numpy()
 
 
 def projection(cameras: Sequence[Camera], choice: str) -> str:
@@ -357,7 +367,7 @@ def _planes(
         group = ((z - lo) / max(hi - lo, 1e-12) * bins).floor().clamp(0, bins - 1).long()
         scale = p.near / z / torch.tensor(p.scales, dtype=points.dtype, device=points.device)[group]
         return [(local[:, 0] * scale, local[:, 1] * scale, torch.ones_like(scale))], scale
-    local = points @ axes.T  # (N, 3): right, up, depth
+    local = (points - torch.from_numpy(frame.origin).to(points)) @ axes.T  # (N, 3): right, up, depth
     facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
     weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
     planes = [  # the planes facing right, up and depth
