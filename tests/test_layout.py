@@ -4,6 +4,7 @@ moments, the projection's period and angle, and the bank's tiling of small textu
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -179,6 +180,34 @@ def test_layout_lays_the_texture_at_its_repeat_and_angle(angle):
     period_world = 2.0 / int(np.argmax(spectrum))  # the wall is 2 units across
     assert period_world == pytest.approx(frame.repeat / 4, rel=0.15)
     assert across.std() < 0.1 * along.std()  # constant along the bars
+
+
+@pytest.mark.parametrize("projection", ["box", "view"])
+@pytest.mark.parametrize("angle", [0.0, 90.0])
+def test_texture_offset_slides_the_texture_right_and_up(projection, angle):
+    """Offset Right / Up slide the laid texture as the first view sees it: by four splats' spacing, each splat
+    reads what the one four to its left (or below) read; a whole repeat gives the same look."""
+    n = 129  # a 2-unit wall: a spacing of 1/64
+    scene, cam = wall(n=n), front_camera(128)
+    views = render_views(scene, [cam], torch.ones(3), "auto")
+    normals = surface_normals(scene, [cam], views.depths, views.alphas)
+    texture = stripes(period=32, size=128)
+    base = TransferConfig(texture_repeats=2.0, layout_projection=projection, n_scales=1, angle=angle)
+    repeat = layout_frame(scene, views, base).repeat
+    step = 4 * 2.0 / (n - 1) / repeat  # four splats, in repeats
+    along = "texture_offset_right" if angle == 0.0 else "texture_offset_up"
+
+    def colours(offset: float) -> torch.Tensor:
+        config = replace(base, **{along: offset})
+        return layout_colours(scene, normals, texture, layout_frame(scene, views, config), angle).reshape(n, n, 3)
+
+    still, slid, whole = colours(0.0), colours(step), colours(1.0)
+    assert float(still.std()) > 0.3  # bars to slide
+    if angle == 0.0:  # vertical bars: x grows with the column
+        torch.testing.assert_close(slid[:, 8:-8], still[:, 4:-12], atol=0.05, rtol=0.0)
+    else:  # horizontal bars: the wall's y grows with the row, the first view's up is -y (OpenCV)
+        torch.testing.assert_close(slid[8:-8], still[12:-4], atol=0.05, rtol=0.0)
+    torch.testing.assert_close(whole, still, atol=0.02, rtol=0.0)
 
 
 @pytest.mark.parametrize("projection", ["box", "view"])

@@ -39,6 +39,8 @@ FRONT = {
     "Texture": (
         "angle",
         "texture_repeats",
+        "texture_offset_right",
+        "texture_offset_up",
         "texture_softness",
         "keep_scene",
         "keep_material",

@@ -42,6 +42,8 @@ PREVIEWED = (
     "shade_softness",
     "texture_softness",
     "texture_repeats",
+    "texture_offset_right",
+    "texture_offset_up",
     "split_size",
     "split_budget",
 )

@@ -559,6 +559,8 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
     assert sections.front_settings("Texture") == [
         "angle",
         "texture_repeats",
+        "texture_offset_right",
+        "texture_offset_up",
         "texture_softness",
         "keep_scene",
         "keep_material",

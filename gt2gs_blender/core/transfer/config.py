@@ -173,6 +173,24 @@ class TransferConfig(SpeedSettings):
         min=0.0,
         soft_max=12.0,
     )
+    texture_offset_right: float = setting(
+        0.0,
+        "Offset Right",
+        "With Lay Out Texture on, slide the texture to the right as the first view sees it, by this share of one "
+        "repeat (1: a whole repeat, the same look), to line a row of bricks or planks up with an edge",
+        "texture",
+        min=-1.0,
+        max=1.0,
+    )
+    texture_offset_up: float = setting(
+        0.0,
+        "Offset Up",
+        "With Lay Out Texture on, slide the texture up as the first view sees it, by this share of one repeat "
+        "(1: a whole repeat, the same look)",
+        "texture",
+        min=-1.0,
+        max=1.0,
+    )
     split_size: float = setting(
         0.015,
         "Split Splats Above",

@@ -99,13 +99,14 @@ class Projector:
 @dataclass(frozen=True)
 class LayoutFrame:
     """The projection's axes (rows: right, up, depth), the world size of one texture height (at the
-    nearest depth group for the view projection), the view projection's projector (None: the box) and the
-    box's origin in the world."""
+    nearest depth group for the view projection), the view projection's projector (None: the box), the
+    box's origin in the world and how far the texture slides right and up (world lengths, at that depth)."""
 
     axes: np.ndarray
     repeat: float
     projector: Projector | None = None
     origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    shift: tuple[float, float] = (0.0, 0.0)
 
 
 def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -> LayoutFrame:
@@ -130,7 +131,8 @@ def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -
     else:
         repeat = _seen_size(scene, cameras[0], config.backend) / config.texture_repeats
     projector = _projector(views, config) if projection(cameras, config.layout_projection) == "view" else None
-    return LayoutFrame(axes=axes, repeat=repeat, projector=projector, origin=object_middle(scene))
+    shift = (config.texture_offset_right * repeat, config.texture_offset_up * repeat)
+    return LayoutFrame(axes=axes, repeat=repeat, projector=projector, origin=object_middle(scene), shift=shift)
 
 
 def object_middle(scene: GaussianScene) -> np.ndarray:
@@ -356,8 +358,10 @@ def _planes(
     points: torch.Tensor, normals: torch.Tensor, frame: LayoutFrame
 ) -> tuple[list[tuple[torch.Tensor, ...]], torch.Tensor]:
     """The projection's (horizontal, vertical, weight) texture coordinates per plane (world lengths at the
-    repeat's scale), and per point how much the projection magnifies a world length there."""
+    repeat's scale, the texture slid by the frame's shift), and per point how much the projection magnifies a
+    world length there."""
     axes = torch.from_numpy(frame.axes).to(points)
+    right, up = frame.shift
     if frame.projector is not None:
         p = frame.projector
         local = (points - torch.from_numpy(p.centre).to(points)) @ axes.T
@@ -366,8 +370,9 @@ def _planes(
         bins = len(p.scales)
         group = ((z - lo) / max(hi - lo, 1e-12) * bins).floor().clamp(0, bins - 1).long()
         scale = p.near / z / torch.tensor(p.scales, dtype=points.dtype, device=points.device)[group]
-        return [(local[:, 0] * scale, local[:, 1] * scale, torch.ones_like(scale))], scale
+        return [(local[:, 0] * scale - right, local[:, 1] * scale - up, torch.ones_like(scale))], scale
     local = (points - torch.from_numpy(frame.origin).to(points)) @ axes.T  # (N, 3): right, up, depth
+    local = local - torch.tensor([right, up, 0.0], dtype=local.dtype, device=local.device)  # the box slid along
     facing = (normals.to(local) @ axes.T).abs().pow(BLEND_POWER)
     weights = facing / facing.sum(dim=1, keepdim=True).clamp_min(1e-12)
     planes = [  # the planes facing right, up and depth
