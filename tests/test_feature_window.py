@@ -7,7 +7,7 @@ import torch
 
 from gt2gs_blender.core.features.extractor import FeatureExtractor, load_feature_extractor
 from gt2gs_blender.core.features.specs import VGG16_RELU3, VGG19_NORM_RELU3
-from gt2gs_blender.core.features.window import plain_features, reached_cells, windowed_features
+from gt2gs_blender.core.features.window import plain_features, reached_cells, selected_features, windowed_features
 
 from .test_features import random_weights
 from .test_ssim import fern_rgb
@@ -94,3 +94,34 @@ def test_an_empty_view_is_the_plain_backdrop_and_a_full_or_odd_one_is_the_whole_
     odd, alpha = over_backdrop(torch.rand(90, 90, 3), 90, 90, (20, 40, 20, 40))  # 45 px at half scale: no whole strides
     features, area = windowed_features(net, odd, alpha, never)
     assert area == 1.0 and torch.equal(features, net(odd))
+
+
+@pytest.mark.parametrize(
+    ("spec", "box"),
+    [
+        (VGG19_NORM_RELU3, (60, 140, 90, 130)),  # reflect padding: a thin object in the middle
+        (VGG16_RELU3, (0, 70, 150, 192)),  # zero padding: against the image's edges
+        (VGG16_RELU3, (0, 160, 0, 192)),  # the whole image
+    ],
+)
+def test_selected_cells_read_what_they_read_in_the_whole_image(spec, box):
+    """The texture-match measure's covered cells, from the network run on their crop only: the same vectors in the
+    same order as picked from the whole image's features (the cells picked scatter inside the box, as an object's
+    covered cells do), and none picked gives none."""
+    from gt2gs_blender.core.transfer.metrics import covered_features
+
+    torch.manual_seed(1)
+    net = FeatureExtractor(spec, random_weights(spec))
+    image, alpha = over_backdrop(torch.rand(160, 192, 3), 160, 192, box)
+    alpha = alpha * (torch.rand(160, 192) > 0.3)  # holes: the picked cells are not one rectangle
+    whole = net(image)[0]
+
+    def pick(hw: tuple[int, int]) -> torch.Tensor:
+        return torch.nn.functional.interpolate(alpha[None, None], size=hw, mode="area")[0, 0] > 0.5
+
+    expected = whole.flatten(1).T[pick(tuple(whole.shape[-2:])).flatten()]
+    assert len(expected) > 4
+    torch.testing.assert_close(selected_features(net, image, pick), expected, atol=1e-4, rtol=1e-4)
+    assert selected_features(net, image, lambda hw: torch.zeros(hw, dtype=torch.bool)).shape == (0, whole.shape[0])
+    covered = covered_features(net, image[0].permute(1, 2, 0), alpha)
+    assert covered.shape[1] == whole.shape[0] and len(covered) > 0

@@ -23,9 +23,17 @@ def reached_cells(lo: int, hi: int, size: int, stride: int, reach: tuple[int, in
     before, after = reach
     first = max(0, math.ceil((lo - after) / stride))
     last = min(size // stride - 1, math.floor((hi - before) / stride))
+    return (first, last, *cells_crop(first, last, size, stride, reach))
+
+
+def cells_crop(first: int, last: int, size: int, stride: int, reach: tuple[int, int]) -> tuple[int, int]:
+    """Along one axis of a network input ``size`` pixels long: the crop (start, stop pixels, multiples of
+    ``stride``) that holds the spans of cells ``first``..``last``, so they read there what they read in the whole
+    input."""
+    before, after = reach
     start = max(0, (stride * first + before) // stride * stride)
     stop = min(size, math.ceil((stride * last + after + 1) / stride) * stride)
-    return first, last, start, stop
+    return start, stop
 
 
 def plain_features(extractor: FeatureExtractor, height: int, width: int, backdrop: torch.Tensor) -> torch.Tensor:
@@ -61,3 +69,28 @@ def windowed_features(
     out = plain().clone()
     out[..., top : bottom + 1, left : right + 1] = cells
     return out, (y1 - y0) * (x1 - x0) / (height * width)
+
+
+def selected_features(
+    extractor: FeatureExtractor, image: torch.Tensor, select: Callable[[tuple[int, int]], torch.Tensor]
+) -> torch.Tensor:
+    """(n, C) the features of the cells ``select(feature_hw)`` ((h, w) bool) picks of ``extractor(image)`` for one
+    (1,3,H,W) image, in row-major order: the network runs only on the crop holding those cells' spans (exact, as
+    :func:`windowed_features`), so a measure over an object's cells skips its backdrop."""
+    x = extractor.network_input(image)
+    height, width = x.shape[-2:]
+    stride = extractor.spec.stride
+    if height % stride or width % stride:
+        features = extractor.network(x)[0]
+        return features.flatten(1).T[select(tuple(features.shape[-2:])).flatten()]
+    cells = select((height // stride, width // stride))
+    rows, cols = cells.any(dim=1).nonzero().squeeze(1), cells.any(dim=0).nonzero().squeeze(1)
+    if len(rows) == 0:  # nothing covered (an object out of view): the whole image gives the empty selection
+        return extractor.network(x)[0].flatten(1).T[:0]
+    top, bottom, left, right = int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+    reach = extractor.spec.cell_reach()
+    y0, y1 = cells_crop(top, bottom, height, stride, reach)
+    x0, x1 = cells_crop(left, right, width, stride, reach)
+    inner = extractor.network(x[..., y0:y1, x0:x1])[0]
+    block = inner[:, top - y0 // stride : bottom - y0 // stride + 1, left - x0 // stride : right - x0 // stride + 1]
+    return block.flatten(1).T[cells[top : bottom + 1, left : right + 1].flatten()]

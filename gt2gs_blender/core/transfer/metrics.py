@@ -34,6 +34,7 @@ from ..cameras.camera import Camera
 from ..cameras.warp import MIN_ALPHA, expected_depth, warp_image
 from ..features.extractor import FeatureExtractor
 from ..features.lpips import LPIPS
+from ..features.window import selected_features
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..train.ssim import WINDOW, gaussian_window, ssim_map
@@ -266,6 +267,6 @@ def evaluate(
 
 
 def covered_features(extractor: FeatureExtractor, image: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
-    """The feature vectors (n, C) of the covered cells (:func:`covered_cells` of ``alpha``) of one (H,W,3) image."""
-    features = extractor(image.permute(2, 0, 1)[None])[0]
-    return features.flatten(1).T[covered_cells(alpha, tuple(features.shape[-2:])).flatten()]
+    """The feature vectors (n, C) of the covered cells (:func:`covered_cells` of ``alpha``) of one (H,W,3) image,
+    the network run on the crop they need only."""
+    return selected_features(extractor, image.permute(2, 0, 1)[None], lambda hw: covered_cells(alpha, hw))
