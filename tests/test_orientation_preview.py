@@ -127,3 +127,21 @@ def test_preview_lays_the_softened_texture_its_stripes_fainter_as_a_gaussian_blu
     )
     kept = np.exp(-2.0 * np.pi**2 * (0.02 * 128) ** 2 / 16**2)
     assert soft.std() / sharp.std() == pytest.approx(kept, abs=0.05)
+
+
+def test_the_preview_shows_the_texture_slid_by_its_offsets():
+    """Offset Up reaches the picture the artist judges the placement by: half a stripe period (1/16 of a repeat of
+    8 stripes) turns the previewed stripes light for dark, a whole repeat gives the same picture back."""
+    stripes, cam = horizontal_stripes(128, 16), front_camera()
+    config = preset("preview", texture_repeats=2.0, keep_scene=0.0, scene_colour=0.0, split_size=0.0)
+    assert config.layout
+
+    def shown(offset: float) -> np.ndarray:
+        image = preview(wall(), stripes, [cam], replace(config, texture_offset_up=offset)).image
+        grey = centre(image).astype(np.float64).mean(axis=-1)
+        return grey - grey.mean()
+
+    still, half, whole = shown(0.0), shown(1.0 / 16.0), shown(1.0)
+    assert still.std() > 10.0  # stripes to slide
+    assert np.corrcoef(still.ravel(), half.ravel())[0, 1] < -0.8
+    assert np.corrcoef(still.ravel(), whole.ravel())[0, 1] > 0.98
