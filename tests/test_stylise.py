@@ -14,6 +14,7 @@ from gt2gs_blender.core.cameras.generate import auto_views, look_at
 from gt2gs_blender.core.features.extractor import FeatureExtractor
 from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.weights import ResolvedWeights
+from gt2gs_blender.core.features.window import plain_features
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.train.optim import GaussianAdam
@@ -320,13 +321,24 @@ def test_still_splats_are_redrawn_from_kept_weights_until_the_geometry_moves(tmp
     assert densified.report["stylise"]["reused_weights"] == 6 - 3  # none in the densifying first phase
 
 
-def test_features_near_splats_leave_the_empty_view_out_and_optimise_as_whole_views_do(tmp_path):
+def test_features_near_splats_leave_the_empty_view_out_and_optimise_as_whole_views_do(tmp_path, monkeypatch):
     """A thin upright object leaves most of each view empty: the feature network runs on the part near its splats
-    only (*Features Near Splats*), and the run ends where whole-view features take it (to float rounding)."""
+    only (*Features Near Splats*), and the run ends where whole-view features take it (to float rounding). The empty
+    backdrop's features are computed once for views of one size over one backdrop, not once a view."""
+    from gt2gs_blender.core.transfer import stylise as stylise_module
+
+    plain_sizes = []
+
+    def counted(extractor, height, width, backdrop):
+        plain_sizes.append((height, width))
+        return plain_features(extractor, height, width, backdrop)
+
+    monkeypatch.setattr(stylise_module, "plain_features", counted)
     scene = blob_scene()
     scene = replace(scene, means=scene.means * torch.tensor([0.06, 1.0, 0.06]))
     config = tiny(cache_dir=str(tmp_path), resolution=256, stylise_steps=8, plateau_window=0)
     on = transfer(scene, stripes(), None, config)
+    assert config.n_views > 1 and len(plain_sizes) == 1
     off = transfer(scene, stripes(), None, replace(config, feature_window=False))
     assert on.report["stylise"]["feature_area"] < 0.85 and off.report["stylise"]["feature_area"] == 1.0
     torch.testing.assert_close(on.scene.sh_dc, off.scene.sh_dc, atol=1e-4, rtol=0)

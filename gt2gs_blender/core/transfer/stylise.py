@@ -201,7 +201,8 @@ class Styliser:
         self.generator = torch.Generator().manual_seed(config.seed)
         self.kept: dict[int, FixedGeometry] = {}
         self.fitted: dict[int, float] = {}
-        self.plain: dict[int, torch.Tensor] = {}  # per view, the empty backdrop's features (Features Near Splats)
+        # the empty backdrop's features (Features Near Splats), one per view size and backdrop: views alike share them
+        self.plain: dict[tuple[float, ...], torch.Tensor] = {}
 
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
@@ -309,9 +310,10 @@ class Styliser:
             return self.extractor(images), 1.0
 
         def plain() -> torch.Tensor:
-            if v not in self.plain:
-                self.plain[v] = plain_features(self.extractor, image.shape[0], image.shape[1], view.backdrop)
-            return self.plain[v]
+            key = (image.shape[0], image.shape[1], *view.backdrop.tolist())
+            if key not in self.plain:
+                self.plain[key] = plain_features(self.extractor, image.shape[0], image.shape[1], view.backdrop)
+            return self.plain[key]
 
         return windowed_features(self.extractor, images, alpha, plain)
 
