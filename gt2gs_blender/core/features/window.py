@@ -55,20 +55,39 @@ def windowed_features(
     stride = extractor.spec.stride
     if height % stride or width % stride:
         return extractor.network(x), 1.0
-    covered = resize(coverage.to(x.dtype)[None, None], (height, width))[0, 0] > 0
-    rows, cols = covered.any(dim=1).nonzero().squeeze(1), covered.any(dim=0).nonzero().squeeze(1)
-    if len(rows) == 0:
+    box = _extent(resize(coverage.to(x.dtype)[None, None], (height, width))[0, 0] > 0)
+    if box is None:
         return plain(), 0.0
     reach = extractor.spec.cell_reach()
-    top, bottom, y0, y1 = reached_cells(int(rows[0]), int(rows[-1]), height, stride, reach)
-    left, right, x0, x1 = reached_cells(int(cols[0]), int(cols[-1]), width, stride, reach)
+    top, bottom, y0, y1 = reached_cells(box[0], box[1], height, stride, reach)
+    left, right, x0, x1 = reached_cells(box[2], box[3], width, stride, reach)
     if (y0, y1, x0, x1) == (0, height, 0, width):  # the splats reach every cell: nothing to leave out
         return extractor.network(x), 1.0
-    inner = extractor.network(x[..., y0:y1, x0:x1])
-    cells = inner[..., top - y0 // stride : bottom - y0 // stride + 1, left - x0 // stride : right - x0 // stride + 1]
     out = plain().clone()
-    out[..., top : bottom + 1, left : right + 1] = cells
+    out[..., top : bottom + 1, left : right + 1] = _cells_on_crop(
+        extractor, x, (top, bottom, left, right), (y0, x0, y1, x1)
+    )
     return out, (y1 - y0) * (x1 - x0) / (height * width)
+
+
+def _extent(mask: torch.Tensor) -> tuple[int, int, int, int] | None:
+    """(first row, last row, first column, last column) where the (h, w) ``mask`` holds, None where it nowhere does."""
+    rows, cols = mask.any(dim=1).nonzero().squeeze(1), mask.any(dim=0).nonzero().squeeze(1)
+    if len(rows) == 0:
+        return None
+    return int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+
+
+def _cells_on_crop(
+    extractor: FeatureExtractor, x: torch.Tensor, cells: tuple[int, int, int, int], crop: tuple[int, int, int, int]
+) -> torch.Tensor:
+    """(B,C,rows,cols) features of the ``cells`` (top, bottom, left, right, inclusive) of the network input ``x``,
+    the network run on its ``crop`` (y0, x0, y1, x1 pixels, on the stride's grid, holding those cells' spans)."""
+    top, bottom, left, right = cells
+    y0, x0, y1, x1 = crop
+    stride = extractor.spec.stride
+    inner = extractor.network(x[..., y0:y1, x0:x1])
+    return inner[..., top - y0 // stride : bottom - y0 // stride + 1, left - x0 // stride : right - x0 // stride + 1]
 
 
 def selected_features(
@@ -84,13 +103,12 @@ def selected_features(
         features = extractor.network(x)[0]
         return features.flatten(1).T[select(tuple(features.shape[-2:])).flatten()]
     cells = select((height // stride, width // stride))
-    rows, cols = cells.any(dim=1).nonzero().squeeze(1), cells.any(dim=0).nonzero().squeeze(1)
-    if len(rows) == 0:  # nothing covered (an object out of view): the whole image gives the empty selection
+    box = _extent(cells)
+    if box is None:  # nothing covered (an object out of view): the whole image gives the empty selection
         return extractor.network(x)[0].flatten(1).T[:0]
-    top, bottom, left, right = int(rows[0]), int(rows[-1]), int(cols[0]), int(cols[-1])
+    top, bottom, left, right = box
     reach = extractor.spec.cell_reach()
     y0, y1 = cells_crop(top, bottom, height, stride, reach)
     x0, x1 = cells_crop(left, right, width, stride, reach)
-    inner = extractor.network(x[..., y0:y1, x0:x1])[0]
-    block = inner[:, top - y0 // stride : bottom - y0 // stride + 1, left - x0 // stride : right - x0 // stride + 1]
+    block = _cells_on_crop(extractor, x, box, (y0, x0, y1, x1))[0]
     return block.flatten(1).T[cells[top : bottom + 1, left : right + 1].flatten()]

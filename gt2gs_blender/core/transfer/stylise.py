@@ -202,7 +202,7 @@ class Styliser:
         self.kept: dict[int, FixedGeometry] = {}
         self.fitted: dict[int, float] = {}
         # the empty backdrop's features (Features Near Splats), one per view size and backdrop: views alike share them
-        self.plain: dict[tuple[float, ...], torch.Tensor] = {}
+        self.plain: dict[tuple[int, int, int], torch.Tensor] = {}
 
     def _ratio_limits(self, scene: GaussianScene) -> torch.Tensor:
         """(N,) scale ratio each Gaussian may keep: the configured limit, or its own starting ratio
@@ -310,7 +310,9 @@ class Styliser:
             return self.extractor(images), 1.0
 
         def plain() -> torch.Tensor:
-            key = (image.shape[0], image.shape[1], *view.backdrop.tolist())
+            # the backdrop by identity: view_targets gives a run's views one tensor, and reading its values
+            # would wait for the GPU at every step
+            key = (image.shape[0], image.shape[1], id(view.backdrop))
             if key not in self.plain:
                 self.plain[key] = plain_features(self.extractor, image.shape[0], image.shape[1], view.backdrop)
             return self.plain[key]
