@@ -159,7 +159,7 @@ def projected(
                 cam,
                 config.angle,
                 size=max(cam.width, cam.height),
-                resolution=config.resolution,
+                pixel_scale=max(cam.width, cam.height) / config.resolution,  # the run's field of view
                 texture_height=height,
                 background=bench.background,
                 keep=0.0,

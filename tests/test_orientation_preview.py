@@ -145,3 +145,15 @@ def test_the_preview_shows_the_texture_slid_by_its_offsets():
     assert still.std() > 10.0  # stripes to slide
     assert np.corrcoef(still.ravel(), half.ravel())[0, 1] < -0.8
     assert np.corrcoef(still.ravel(), whole.ravel())[0, 1] > 0.98
+
+
+def test_a_landscape_view_shows_the_texture_as_large_as_a_square_one_of_the_same_lens():
+    """The texture's on-screen size follows the camera's focal length, not its height: a 4:3 view and a square
+    view of one lens show the same stripe period (the fern's cameras are 4:3; by the height they showed 3/4 of it)."""
+    scene, stripes = wall(), horizontal_stripes(128, 16)
+    periods = []
+    for height in (256, 192):
+        cam = look_at((0.0, 0.0, -2.2), (0.0, 0.0, 0.0), width=256, height=height, fov_deg=40.0, up=(0.0, -1.0, 0.0))
+        image = orientation_preview(scene, stripes, cam, 0.0, size=256, texture_height=64, n_groups=1)
+        periods.append(stripe_period(image[40:-40, 128].astype(np.float64).mean(axis=-1)))
+    assert abs(periods[1] / periods[0] - 1.0) < 0.05

@@ -58,7 +58,7 @@ def orientation_preview(
     angle_deg: float,
     *,
     size: int = 256,
-    resolution: int = 256,
+    pixel_scale: float = 1.0,
     texture_height: int = 256,
     n_groups: int = 4,
     depth_ratio: float = 0.0,
@@ -71,9 +71,9 @@ def orientation_preview(
     the layout lays it (:func:`under_scene`): shaded by the scene's luminance to the power ``keep`` (the run's
     ``keep_scene``), with ``colour`` of the scene's own colour mixed in (its ``scene_colour``).
 
-    ``resolution`` and ``texture_height`` are the transfer's settings: the texture appears as large
-    on screen as the transfer's texture bank makes it (its nearest scale spans
-    ``texture_height / RENDER_SCALE`` pixels of a ``resolution`` image), so the preview matches the run.
+    ``texture_height`` is the transfer's setting and ``pixel_scale`` ``camera``'s focal length over the transfer's
+    views': the texture appears as large on screen as the transfer's texture bank makes it (its nearest scale spans
+    ``texture_height / RENDER_SCALE`` pixels of the transfer's views), so the preview matches the run.
     ``depth_ratio`` is the run's setting too (0: measured, here on this view alone).
     """
     image = load_texture(texture) if not isinstance(texture, np.ndarray) else np.asarray(texture[..., :3], np.float32)
@@ -90,7 +90,7 @@ def orientation_preview(
         shading(luminance, luminance[torch.from_numpy(covered)], keep).reshape(-1), seen.reshape(-1, 3), colour
     )
 
-    nearest_px = texture_height / RENDER_SCALE * cam.height / resolution / image.shape[0]
+    nearest_px = texture_height / RENDER_SCALE * pixel_scale * size / max(camera.width, camera.height) / image.shape[0]
     laid = np.zeros((cam.height, cam.width, 3), np.float32)
     if depth_ratio <= 0.0:
         depth_ratio = min(group_depth_ratio(depth, out.alphas[0], n_groups, min_alpha=MIN_ALPHA), MAX_DEPTH_RATIO)
@@ -165,7 +165,7 @@ def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:
         camera,
         config.angle,
         size=size,
-        resolution=config.resolution,
+        pixel_scale=camera.fx / plan.cameras[0].fx,
         texture_height=config.texture_height,
         n_groups=config.n_scales if config.depth_groups else 1,
         depth_ratio=config.depth_ratio,
