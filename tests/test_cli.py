@@ -544,7 +544,7 @@ def test_preview_command_writes_the_runs_first_view_as_the_engine_draws_it(capsy
     config = preset("preview", n_views=4, backend="torch", device="cpu", keep_scene=0.0, scene_colour=0.0)
     expected = preview(read_ply(small_ply), load_texture(texture), None, config, size=96).image
     np.testing.assert_array_equal(pictures["0"], expected)
-    assert pictures["0"].shape == (96, 96, 3)
+    assert pictures["0"].shape == (60, 96, 3)  # the run's first view, cut to the wide torus, 96 px across
     on = (pictures["0"] < 250).any(axis=-1)
     assert on.mean() > 0.05  # the torus is in view
     assert np.abs(pictures["0"].astype(int) - pictures["45"].astype(int))[on].mean() > 10  # the angle turns it

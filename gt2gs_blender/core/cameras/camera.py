@@ -128,6 +128,20 @@ class Camera:
             self.world_to_cam, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy, width, height, self.name
         )
 
+    def cropped(self, width: int, height: int) -> Camera:
+        """The same camera with its image cut (or grown) to ``width`` x ``height`` about its centre; the same
+        pixels where the two overlap when the sizes differ by even counts."""
+        return Camera(
+            self.world_to_cam,
+            self.fx,
+            self.fy,
+            self.cx + (width - self.width) / 2.0,
+            self.cy + (height - self.height) / 2.0,
+            width,
+            height,
+            self.name,
+        )
+
     def project(self, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Pixel coordinates (N,2) and camera depths (N,) of world points (N,3).
 

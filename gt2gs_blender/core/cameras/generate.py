@@ -321,6 +321,39 @@ def auto_views(
     return views(_fitting_radius(views, corners, sphere_radius, enclosing) * margin)
 
 
+CUT_SHARE = 0.999
+"""A view cut to its object keeps this share of the splat centres in front of it inside, along each axis: a few
+floaters do not decide its size."""
+CUT_MARGIN = 1.1
+CUT_PAD = 8
+"""It keeps their extent times this margin and this many pixels a side more: the outermost splats' own footprints."""
+CUT_STEP = 8
+"""Views are cut by this many pixels a side at a time: a size of whole 8 px rasterizer tiles, and of whole tiles at
+half size (Feature Scale 0.5), stays so, and the pixel grid stays where it was."""
+
+
+def cut_to_points(
+    cameras: Sequence[Camera], points: np.ndarray, margin: float = CUT_MARGIN, pad: int = CUT_PAD
+) -> list[Camera]:
+    """Views of one size cut about their centres to the part of their images that ``points`` (world, (N, 3)) fill
+    in any of them (``CUT_SHARE`` of the points in front along each axis), with ``margin`` and ``pad``, never grown
+    and cut by ``CUT_STEP`` a side: a tall guitar framed in square views leaves half of each empty."""
+    if not cameras or len(points) == 0:
+        return list(cameras)
+    size = np.array([cameras[0].width, cameras[0].height])
+    if any((cam.width, cam.height) != tuple(size) for cam in cameras):
+        raise ValueError("cut_to_points needs views of one size")
+    reach = np.zeros(2)
+    for cam in cameras:
+        uv, depth = cam.project(points)
+        if not np.any(depth > 0):
+            return list(cameras)
+        reach = np.maximum(reach, np.quantile(np.abs(uv[depth > 0] - [cam.cx, cam.cy]), CUT_SHARE, axis=0))
+    wanted = 2.0 * (reach * margin + pad)
+    width, height = (size - 2 * CUT_STEP * np.floor(np.maximum(size - wanted, 0.0) / (2 * CUT_STEP))).astype(int)
+    return [cam.cropped(int(width), int(height)) for cam in cameras]
+
+
 def _fitting_radius(views: Callable[[float], list[Camera]], corners: np.ndarray, low: float, high: float) -> float:
     """Smallest orbit radius in [low, high] at which every corner projects inside every view (bisection)."""
 

@@ -45,7 +45,14 @@ class TransferConfig(SpeedSettings):
 
     # -- views
     resolution: int = setting(
-        256, "Resolution", "Longest side of the working views", "views", unit="px", min=16, soft_max=1024
+        256,
+        "Resolution",
+        "Longest side of the working views; automatic views frame the object in a square this size, then leave out "
+        "the empty bands beside it",
+        "views",
+        unit="px",
+        min=16,
+        soft_max=1024,
     )
     dense_upscale: float = setting(
         1.0,

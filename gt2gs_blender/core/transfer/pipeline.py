@@ -38,7 +38,7 @@ from .shade import laid_exposure
 from .skips import Plateau
 from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture_bank import TextureBank, compact_bank
-from .views import ViewSet, fit_cameras, render_views, view_targets
+from .views import ViewSet, render_views, view_targets
 
 STAGE_WEIGHTS = {"prepare": 0.1, "bank": 0.15, "stylise": 0.65, "finish": 0.1}
 """Rough share of a run's time per stage, for the overall progress fraction and the ETA."""
@@ -319,11 +319,12 @@ def _measured_views(
     result: GaussianScene, plan: RunPlan, config: TransferConfig
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """The result's and the original's renders and the original's covered pixels from every ``MEASURE_STRIDE``-th
-    of the run's views at ``MEASURE_SIDE``: what the content measures read. SSIM's window spans less of the object at
-    a larger size and a run's splats are shaped for its own, so content measured at each run's working size would not
-    compare across Resolution, presets and Dense Upscale (the guitar read 0.745 at 480 px against 0.784 at 256, while
-    held-out views at 512 px said the 480 px run kept more: 0.791 against 0.749)."""
-    cameras = fit_cameras(plan.original, plan.cameras[::MEASURE_STRIDE], MEASURE_SIDE, config.n_views)
+    of the run's views, scaled so their frame (the working ``resolution``) is ``MEASURE_SIDE``: what the content
+    measures read. SSIM's window spans less of the object at a larger size and a run's splats are shaped for its own,
+    so content measured at each run's working size would not compare across Resolution, presets and Dense Upscale
+    (the guitar read 0.745 at 480 px against 0.784 at 256, while held-out views at 512 px said the 480 px run kept
+    more: 0.791 against 0.749)."""
+    cameras = [cam.scaled(MEASURE_SIDE / plan.config.resolution) for cam in plan.cameras[::MEASURE_STRIDE]]
     degree = content_degree(plan.original, config)
     original = render_views(plan.original, cameras, plan.background, config.backend, degree)
     stylised = render_views(result, cameras, plan.background, config.backend)

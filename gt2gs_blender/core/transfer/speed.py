@@ -77,6 +77,13 @@ class SpeedSettings(MachineSettings):
         "features elsewhere (same result, faster on an object that leaves much of the view empty)",
         "speed",
     )
+    cut_views: bool = setting(
+        True,
+        "Views Fit Object",
+        "Leave out the empty bands beside the object in the automatic views (the same pixels of the object, faster "
+        "on a tall or wide one)",
+        "speed",
+    )
     plateau_window: int = setting(
         16,
         "Plateau Window",

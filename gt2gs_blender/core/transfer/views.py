@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import torch
 
 from ..cameras.camera import Camera
-from ..cameras.generate import auto_views
+from ..cameras.generate import auto_views, cut_to_points
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor
 from ..render import render
@@ -56,12 +56,20 @@ class ViewSet:
 
 
 def fit_cameras(
-    scene: GaussianScene, views: Sequence[Camera] | int | None, resolution: int, n_default: int, up: str = "+z"
+    scene: GaussianScene,
+    views: Sequence[Camera] | int | None,
+    resolution: int,
+    n_default: int,
+    up: str = "+z",
+    *,
+    cut: bool = False,
 ) -> list[Camera]:
-    """Automatic views (a count or None) around the ``up`` axis, or the given cameras resized so their longest
-    side is ``resolution``."""
+    """Automatic views (a count or None) around the ``up`` axis, framed in ``resolution`` squares (``cut``: and cut
+    to the splats, so a tall or wide object is not rendered with empty bands), or the given cameras resized so their
+    longest side is ``resolution``."""
     if views is None or isinstance(views, int):
-        return auto_views(scene, views or n_default, width=resolution, height=resolution, up=up)
+        framed = auto_views(scene, views or n_default, width=resolution, height=resolution, up=up)
+        return cut_to_points(framed, scene.means.detach().double().cpu().numpy()) if cut else framed
     cameras = list(views)
     if not cameras:
         raise GT2GSError("no views given: pass cameras or a number of automatic views")
