@@ -62,7 +62,8 @@ def test_a_layout_off_run_is_compared_with_the_sketch_its_preview_shows():
     first = [recognise.sketched(run, b, TEXTURE, alphas)[0][0] for run, b in zip(runs, (bench, other), strict=True)]
     assert np.abs(first[0].astype(int) - first[1].astype(int)).max() > 40  # the sketch keeps the scene's light
     cam = bench.held_out[0]
-    shown = show(replace(runs[0], cameras=[cam]), size=max(cam.width, cam.height)).image
+    framed = cam.scaled(runs[0].config.resolution / max(cam.width, cam.height))  # as the run frames its views
+    shown = show(replace(runs[0], cameras=[framed]), size=max(cam.width, cam.height)).image
     np.testing.assert_array_equal(first[0], shown)
 
 
