@@ -518,6 +518,33 @@ def test_the_before_after_strip_shows_the_run_s_own_cameras_when_given():
     assert all(float(-c.world_to_cam[1, :3] @ np.array([0.0, -1.0, 0.0])) > 0.8 for c in ring)
 
 
+def test_the_strip_lines_up_views_of_any_shape_each_centred_in_its_square_cell(tmp_path):
+    """Given 4:3 cameras, each view is rendered whole, centred between white bands in a STRIP_SIZE square (the
+    rows of the strip keep one height, so the swatch and the batch sheet's cells line up); the automatic ring is cut
+    to a wide torus and enlarged, so the torus covers more of its cells than of the square ring's views."""
+    from gt2gs_blender.app.jobs import STRIP_SIZE, strip_cameras, write_before_after
+    from gt2gs_blender.core.render import render
+
+    scene = torus_scene(n_major=24, n_minor=12)
+    given = auto_views(scene, 8, width=400, height=300)
+    texture = np.full((32, 32, 3), 0.5, np.float32)
+    write_before_after(tmp_path / "strip.png", scene, scene, texture, given)
+    strip = read_png(tmp_path / "strip.png")[..., ::-1]
+    assert strip.shape == (2 * STRIP_SIZE, 5 * STRIP_SIZE, 3)
+    (first, *_) = strip_cameras(scene, given, "+z")
+    band = (STRIP_SIZE - first.height) // 2
+    assert (first.width, band) == (STRIP_SIZE, 32)
+    cell = strip[:STRIP_SIZE, STRIP_SIZE : 2 * STRIP_SIZE]
+    assert (cell[:band] == 255).all() and (cell[band + first.height :] == 255).all()
+    direct = render(scene, [first], background=(1.0, 1.0, 1.0)).colors[0].clamp(0, 1).numpy()
+    assert np.abs(cell[band : band + first.height].astype(int) - (direct * 255 + 0.5).astype(int)).max() <= 1
+    ring = strip_cameras(scene, None, "+z")
+    square = auto_views(scene, 4, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0)
+    assert all(max(c.width, c.height) == STRIP_SIZE and c.width > c.height for c in ring)
+    covered = [float((render(scene, cams, render_depth=False).alphas > 0.5).float().mean()) for cams in (ring, square)]
+    assert covered[0] * ring[0].width * ring[0].height / STRIP_SIZE**2 > 1.2 * covered[1]
+
+
 # -- preview ----------------------------------------------------------------------------------------
 
 

@@ -20,7 +20,7 @@ import torch
 
 from ..core.atomic import atomic_write
 from ..core.cameras.camera import Camera
-from ..core.cameras.generate import auto_views
+from ..core.cameras.generate import auto_views, cut_to_scene
 from ..core.errors import InputFileError
 from ..core.progress import ProgressCallback
 from ..core.render import render
@@ -120,12 +120,15 @@ def summary(report: dict) -> str:
 
 
 def strip_cameras(original: GaussianScene, views: Sequence[Camera] | int | None, up: str) -> list[Camera]:
-    """The before/after strip's views: four of the run's own cameras, spread over them, when it was given
-    cameras (a capture seen as it was taken); else a ring around the ``up`` axis."""
+    """The before/after strip's views, longest side ``STRIP_SIZE``: four of the run's own cameras, spread over them,
+    when it was given cameras (a capture seen as it was taken); else a ring around the ``up`` axis cut to the object
+    and enlarged to fill its cells (a wide donut shows larger)."""
     if views is None or isinstance(views, int):
-        return auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0, up=up)
-    cameras = list(views)
-    picked = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(min(STRIP_VIEWS, len(cameras)))]
+        ring = auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0, up=up)
+        picked = cut_to_scene(ring, original)
+    else:
+        cameras = list(views)
+        picked = [cameras[i * len(cameras) // STRIP_VIEWS] for i in range(min(STRIP_VIEWS, len(cameras)))]
     return [c.scaled(STRIP_SIZE / max(c.width, c.height)) for c in picked]
 
 
@@ -140,9 +143,18 @@ def write_before_after(
 ) -> None:
     """A PNG: the texture, then the original (top) and stylised (bottom) scene from the strip's views."""
     cams = strip_cameras(original, views, up)
-    rows = [render(s, cams, background=(1.0, 1.0, 1.0)).colors.clamp(0, 1) for s in (original, stylised)]
-    tiles = [torch.cat(list(r), dim=1) for r in rows]
+    tiles = [torch.cat([_strip_cell(s, cam) for cam in cams], dim=1) for s in (original, stylised)]
     swatch = torch.from_numpy(cv2.resize(texture, (STRIP_SIZE, STRIP_SIZE), interpolation=cv2.INTER_AREA))
     white = torch.ones_like(swatch)
     image = torch.cat([torch.cat([swatch, tiles[0]], 1), torch.cat([white, tiles[1]], 1)], 0)
     write_png(path, (image.numpy() * 255 + 0.5).astype(np.uint8))
+
+
+def _strip_cell(scene: GaussianScene, camera: Camera) -> torch.Tensor:
+    """(STRIP_SIZE, STRIP_SIZE, 3) on the CPU: ``scene`` from ``camera`` (longest side ``STRIP_SIZE``) centred on
+    white, so views of any shape (a capture's 4:3, a ring cut to a tall guitar) line up in the strip."""
+    image = render(scene, [camera], background=(1.0, 1.0, 1.0)).colors[0].clamp(0, 1).cpu()
+    cell = torch.ones(STRIP_SIZE, STRIP_SIZE, 3, dtype=image.dtype)
+    top, left = (STRIP_SIZE - camera.height) // 2, (STRIP_SIZE - camera.width) // 2
+    cell[top : top + camera.height, left : left + camera.width] = image
+    return cell

@@ -354,6 +354,11 @@ def cut_to_points(
     return [cam.cropped(int(width), int(height)) for cam in cameras]
 
 
+def cut_to_scene(cameras: Sequence[Camera], scene: GaussianScene) -> list[Camera]:
+    """:func:`cut_to_points` of the scene's splat centres."""
+    return cut_to_points(cameras, scene.means.detach().double().cpu().numpy())
+
+
 def _fitting_radius(views: Callable[[float], list[Camera]], corners: np.ndarray, low: float, high: float) -> float:
     """Smallest orbit radius in [low, high] at which every corner projects inside every view (bisection)."""
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import torch
 
 from ..cameras.camera import Camera
-from ..cameras.generate import auto_views, cut_to_points
+from ..cameras.generate import auto_views, cut_to_scene
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor
 from ..render import render
@@ -69,7 +69,7 @@ def fit_cameras(
     longest side is ``resolution``."""
     if views is None or isinstance(views, int):
         framed = auto_views(scene, views or n_default, width=resolution, height=resolution, up=up)
-        return cut_to_points(framed, scene.means.detach().double().cpu().numpy()) if cut else framed
+        return cut_to_scene(framed, scene) if cut else framed
     cameras = list(views)
     if not cameras:
         raise GT2GSError("no views given: pass cameras or a number of automatic views")
