@@ -324,6 +324,9 @@ def auto_views(
 CUT_SHARE = 0.999
 """A view cut to its object keeps this share of the splat centres in front of it inside, along each axis: a few
 floaters do not decide its size."""
+CUT_SAMPLE = 65536
+"""The cut reads at most this many of the centres, evenly strided: the share needs no more (a 500,000-splat capture
+took 0.5 s to project whole for 16 views)."""
 CUT_MARGIN = 1.1
 CUT_PAD = 8
 """It keeps their extent times this margin and this many pixels a side more: the outermost splats' own footprints."""
@@ -340,6 +343,7 @@ def cut_to_points(
     and cut by ``CUT_STEP`` a side: a tall guitar framed in square views leaves half of each empty."""
     if not cameras or len(points) == 0:
         return list(cameras)
+    points = points[:: -(-len(points) // CUT_SAMPLE)]
     size = np.array([cameras[0].width, cameras[0].height])
     if any((cam.width, cam.height) != tuple(size) for cam in cameras):
         raise ValueError("cut_to_points needs views of one size")
