@@ -76,3 +76,27 @@ def test_a_few_floaters_do_not_decide_the_cut() -> None:
     (with_floaters,) = cut_to_points(cams, np.concatenate([cluster, floaters]))
     assert (with_floaters.width, with_floaters.height) == (alone.width, alone.height)
     assert alone.width < 128 and alone.height < 128
+
+
+def test_a_large_cloud_is_cut_from_a_sample_as_from_all_its_points(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Past ``CUT_SAMPLE`` centres the cut reads an even stride of them: a 300,000-point elongated cloud (ordered
+    along its length, as a file sorted in space would be) gets the cut that all of its points give."""
+    from gt2gs_blender.core.cameras import generate
+
+    rng = np.random.default_rng(2)
+    cloud = rng.normal(scale=(0.1, 0.1, 0.5), size=(300_000, 3))
+    cloud = cloud[np.argsort(cloud[:, 2])]
+    cams = ring_views()
+    sampled = cut_to_points(cams, cloud)
+    monkeypatch.setattr(generate, "CUT_SAMPLE", len(cloud))
+    whole = cut_to_points(cams, cloud)
+    assert [(c.width, c.height) for c in sampled] == [(c.width, c.height) for c in whole]
+    assert sampled[0].width < 256 and sampled[0].height <= 256
+
+
+def ring_views() -> list:
+    """Four 256 px views on a ring about +z, 4 units out, looking at the origin."""
+    return [
+        look_at((4.0 * np.cos(a), 4.0 * np.sin(a), 1.0), (0.0, 0.0, 0.0), width=256, height=256)
+        for a in np.linspace(0.0, 2.0 * np.pi, 4, endpoint=False)
+    ]
