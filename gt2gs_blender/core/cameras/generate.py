@@ -343,7 +343,7 @@ def cut_to_points(
     and cut by ``CUT_STEP`` a side: a tall guitar framed in square views leaves half of each empty."""
     if not cameras or len(points) == 0:
         return list(cameras)
-    points = points[:: -(-len(points) // CUT_SAMPLE)]
+    points = points[:: math.ceil(len(points) / CUT_SAMPLE)]
     size = np.array([cameras[0].width, cameras[0].height])
     if any((cam.width, cam.height) != tuple(size) for cam in cameras):
         raise ValueError("cut_to_points needs views of one size")

@@ -47,8 +47,8 @@ class TransferConfig(SpeedSettings):
     resolution: int = setting(
         256,
         "Resolution",
-        "Longest side of the working views; automatic views frame the object in a square this size, then leave out "
-        "the empty bands beside it",
+        "Longest side of the working views; automatic views frame the object in a square this size (with Views Fit "
+        "Object, less the empty bands beside it)",
         "views",
         unit="px",
         min=16,
