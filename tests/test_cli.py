@@ -67,10 +67,12 @@ def foreground_fraction(path: Path, background_bgr: tuple[int, int, int] = (255,
 def test_info_without_a_scene_says_which_rasterizer_runs_and_why(capsys, tmp_path):
     """``info`` alone names the rasterizer ``auto`` resolves to here; with no C++ compiler (CXX and PATH
     pointing nowhere, in a subprocess) it names the numba kernel and why."""
+    from gt2gs_blender.core.features.extractor import cpu_has_bfloat16
     from gt2gs_blender.core.render import numba_backend, resolve_backend
 
     code, out, _ = run(capsys, "info", "--json")
     assert code == 0 and json.loads(out)["rasterizer"] == resolve_backend("auto", "cpu")
+    assert json.loads(out)["precision"] == ("bfloat16" if cpu_has_bfloat16() else "float32")
     nowhere = tmp_path / "no-bin"
     nowhere.mkdir()
     env = {**os.environ, "CXX": str(nowhere / "c++"), "PATH": str(nowhere), "GT2GS_BUILD_DIR": str(tmp_path)}
@@ -83,6 +85,7 @@ def test_info_without_a_scene_says_which_rasterizer_runs_and_why(capsys, tmp_pat
     else:
         assert first.startswith("rasterizer:   portable torch (no C++ compiler found and numba is not installed"), first
     assert "C++ compiler: not found" in proc.stdout
+    assert "precision:    VGG in " in proc.stdout
 
 
 def test_info_generated_ply(capsys, small_ply):

@@ -81,6 +81,7 @@ def machine_info(
     import torch
 
     from ..core.device import resolve_device
+    from ..core.features.extractor import precision_note
     from ..core.features.weights import VGG16_URL, resolve_weights, search_dirs
     from ..core.render import kernel_cache, numba_backend
 
@@ -102,6 +103,7 @@ def machine_info(
     except GT2GSError as exc:
         info["weights"] = {"spec": None, "weights_file": None, "fallback": True, "reason": str(exc), "error": True}
         info["weights_folders"] = []
+    info["precision"], info["precision_note"] = precision_note(info["device"])
     compiler = compiler_found()
     built = kernel_cache.is_built()
     numba = numba_found()

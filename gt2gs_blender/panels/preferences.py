@@ -65,6 +65,7 @@ def machine_rows(state: machine.MachineState) -> list[tuple[str, str, str]]:
         ("C++ Compiler", info.get("compiler") or "not found", "CHECKMARK" if info.get("compiler") else "ERROR"),
         ("Numba", numba_text(info), "CHECKMARK" if info.get("numba") else "INFO"),
         ("CUDA", f"{cuda} (torch {info.get('torch')})", "CHECKMARK" if info.get("cuda") else "INFO"),
+        ("Precision", f"{info.get('precision')} with Mixed Precision ({info.get('precision_note')})", "INFO"),
         ("Kernel Cache", f"{info.get('kernel_cache')} ({built})", "FILE_FOLDER"),
     ]
 

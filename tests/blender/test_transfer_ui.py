@@ -718,6 +718,8 @@ def test_machine_check_runs_in_the_workers_python(fresh, tmp_path, monkeypatch):
         info["compiler"] or "not found"
     )
     assert rows["Numba"].startswith(info["numba"] or "not installed")
+    assert rows["Precision"] == f"{info['precision']} with Mixed Precision ({info['precision_note']})"
+    assert info["precision"] in ("bfloat16", "float32")  # the CPU's (no CUDA device asked)
     offer, advice = weights_offer(machine.current(), online=True)
     assert offer and "https://download.pytorch.org/models/vgg16-397923af.pth" in advice
     offer, advice = weights_offer(machine.current(), online=False)

@@ -98,6 +98,7 @@ def _format_machine(info: dict[str, Any]) -> str:
             f"numba:        {numba if info['numba'] else 'not installed'}",
             f"kernel cache: {info['kernel_cache']} (C++ kernel {'built' if info['kernel_built'] else 'not built'})",
             f"device:       {info['device']}, {info['threads']} threads, torch {info['torch']}",
+            f"precision:    VGG in {info['precision']} with Mixed Precision ({info['precision_note']})",
             f"weights:      {weights.get('weights_file') or weights.get('reason') or 'none found'}",
         ]
     )

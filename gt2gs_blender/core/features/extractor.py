@@ -168,14 +168,36 @@ def load_feature_extractor(
 
 
 def mixed_precision_dtype(device: torch.device | str, enabled: bool = True) -> torch.dtype | None:
-    """The dtype the VGG convolutions run in on ``device``: float16 on a CUDA GPU, else None = float32.
+    """The dtype the VGG convolutions run in on ``device``: float16 on a CUDA GPU, bfloat16 on a CPU with bfloat16
+    instructions (:func:`cpu_has_bfloat16`), else None = float32.
 
-    Measured with the same autocast on real features (tests/test_features.py): float16 features are
-    within 0.07 % of float32, 99.8 % of cells keep their nearest texture feature, and the texture
-    loss's image gradient stays at cosine 0.995 (a 1024x loss scale only reaches 0.997, so none is
-    used); bfloat16 was 0.5 % and cosine 0.97. Never on the CPU: on this project's AVX512-BF16 machine
-    float16 convolutions were 18x slower than float32, and bfloat16, 3.5x faster for VGG alone at
-    256 px, left the ``fast`` preset's stylise stage no faster (VGG sees 128 px there) with texture
-    match 1.3 % worse."""
+    Measured with the same autocast on real features (tests/test_features.py): float16 features are within 0.07 % of
+    float32, 99.8 % of cells keep their nearest texture feature and the texture loss's image gradient stays at cosine
+    0.995 (a 1024x loss scale only reaches 0.997, so none is used); bfloat16 0.66 %, 99.0 % and 0.969, yet on this
+    project's AVX512-BF16 CPU it ran VGG's forward and backward 1.5x as fast and the captures' ``fast`` runs 1.2-1.35x,
+    finding the same textures at the same content (docs/speed.md). float16 convolutions there were 18x slower than
+    float32; a CPU without bfloat16 instructions would emulate it, so it keeps float32."""
     device = torch.device(device)
-    return torch.float16 if enabled and device.type == "cuda" else None
+    if not enabled:
+        return None
+    if device.type == "cuda":
+        return torch.float16
+    return torch.bfloat16 if device.type == "cpu" and cpu_has_bfloat16() else None
+
+
+def precision_note(device: torch.device | str) -> tuple[str, str]:
+    """(dtype name, why) of the feature network's convolutions on ``device`` with *Mixed Precision* on: what the
+    machine check shows."""
+    device = torch.device(device)
+    mixed = mixed_precision_dtype(device)
+    if device.type == "cuda":
+        return "float16", "a CUDA GPU"
+    if mixed is not None:
+        return "bfloat16", "this CPU has bfloat16 instructions"
+    return "float32", "this CPU has no bfloat16 instructions"
+
+
+def cpu_has_bfloat16() -> bool:
+    """Whether this CPU multiplies bfloat16 in hardware (AVX512-BF16 or AMX), as torch's own kernels check."""
+    checks = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    return any(bool(getattr(torch.cpu, name, lambda: False)()) for name in checks)

@@ -16,7 +16,7 @@ class MachineSettings:
     mixed_precision: bool = setting(
         True,
         "Mixed Precision",
-        "Run the feature network in float16 on a CUDA GPU (the CPU always uses float32)",
+        "Run the feature network in float16 on a CUDA GPU, bfloat16 on a CPU with bfloat16 instructions (faster)",
         "machine",
         blender=IN_PREFERENCES,
     )
