@@ -288,7 +288,7 @@ def test_mixed_precision_is_float16_on_cuda_and_bfloat16_on_a_cpu_with_it():
 
 
 def test_cpu_bfloat16_follows_the_instructions_torch_reports(monkeypatch):
-    """bfloat16 on the CPU only where it is native (emulated, it is slower than float32)."""
+    """bfloat16 on the CPU only where its instructions are (elsewhere it would be emulated)."""
     for avx512_bf16, amx, expected in [(False, False, False), (True, False, True), (False, True, True)]:
         monkeypatch.setattr(torch.cpu, "_is_avx512_bf16_supported", lambda v=avx512_bf16: v)
         monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda v=amx: v)
