@@ -96,6 +96,23 @@ def test_a_ground_patch_under_an_object_says_which_way_is_up() -> None:
     np.testing.assert_array_equal(estimate_up_axis(points * [1.0, -1.0, 1.0]), [0.0, 1.0, 0.0])
 
 
+def test_a_garden_stands_on_its_lawn_as_its_real_cameras_say() -> None:
+    """Mip-NeRF 360's garden (its SfM points and three of its real cameras, from gsplat's test data): up is +Z, the
+    cameras' own up, not the edge where a sparse ring of tree tops spreads wider than the lawn; a copy turned to a
+    trainer's -Y up finds -Y."""
+    path = Path(__file__).resolve().parents[2] / "shared" / "data" / "scenes" / "garden_points" / "test_garden.npz"
+    if not path.is_file():
+        pytest.skip(f"garden points not found at {path}")
+    garden = np.load(path)
+    points = garden["means3d"].astype(np.float64)
+    lo, hi = np.quantile(points, [0.01, 0.99], axis=0)
+    points = points[np.all((points >= lo) & (points <= hi), axis=1)]
+    cameras_up = -garden["viewmats"][:, 1, :3].mean(axis=0)  # a camera's up is its -Y row
+    np.testing.assert_array_equal(np.round(cameras_up / np.linalg.norm(cameras_up)), [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(estimate_up_axis(points), [0.0, 0.0, 1.0])
+    np.testing.assert_array_equal(estimate_up_axis(points @ QUARTER_TURN_X.T), [0.0, -1.0, 0.0])
+
+
 def test_the_run_plan_reports_the_up_axis_it_found(guitar: GaussianScene) -> None:
     """A plan with ``up`` auto and automatic views resolves it to the axis found (the guitar's -Y), for the report;
     given cameras keep it as asked (they need none)."""
