@@ -294,3 +294,5 @@ def test_cpu_bfloat16_follows_the_instructions_torch_reports(monkeypatch):
         monkeypatch.setattr(torch.cpu, "_is_amx_tile_supported", lambda v=amx: v)
         assert cpu_has_bfloat16() is expected
         assert mixed_precision_dtype("cpu") is (torch.bfloat16 if expected else None)
+        assert precision_note("cpu")[0] == ("bfloat16" if expected else "float32")
+    assert precision_note("cuda") == ("float16", "a CUDA GPU")

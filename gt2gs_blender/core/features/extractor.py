@@ -188,13 +188,12 @@ def mixed_precision_dtype(device: torch.device | str, enabled: bool = True) -> t
 def precision_note(device: torch.device | str) -> tuple[str, str]:
     """(dtype name, why) of the feature network's convolutions on ``device`` with *Mixed Precision* on: what the
     machine check shows."""
-    device = torch.device(device)
     mixed = mixed_precision_dtype(device)
-    if device.type == "cuda":
-        return "float16", "a CUDA GPU"
-    if mixed is not None:
-        return "bfloat16", "this CPU has bfloat16 instructions"
-    return "float32", "this CPU has no bfloat16 instructions"
+    why = _PRECISION_WHY.get(mixed, "this CPU has no bfloat16 instructions")
+    return str(mixed or torch.float32).removeprefix("torch."), why
+
+
+_PRECISION_WHY = {torch.float16: "a CUDA GPU", torch.bfloat16: "this CPU has bfloat16 instructions"}
 
 
 def cpu_has_bfloat16() -> bool:
