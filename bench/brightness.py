@@ -5,7 +5,7 @@ the original's and each texture photo's own.
 bench/recognise.py saved under bench/out/recognise/<TAG>/<SCENE>/<texture>-<preset>-s<seed>.ply, renders each from
 the scene's held-out views at the bench's size, and averages the luminance (Rec. 709 weights, as the engine takes it)
 of the pixels the original covers (alpha 0.9 and above). It prints a table and writes
-bench/out/brightness/<SCENE>.json. docs/quality.md's *Keep Material* section is made with it: whether a result keeps
+bench/out/brightness/<SCENE>.json. docs/quality_log.md's *Keep Material* section is made with it: whether a result keeps
 the capture's brightness or takes the photo's.
 """
 

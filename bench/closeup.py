@@ -4,7 +4,7 @@
 [--out PATH]`` renders ``SCENE`` (one of bench/recognise_scenes.py's) and the results (such as those
 bench/recognise.py saves under bench/out/recognise/<tag>/<scene>/) from held-out view ``--view`` at longest side
 ``--size``, crops ``--box`` (fractions of the frame) from each and writes them side by side, original first, to
-``--out`` (default bench/out/closeup/<scene>-v<view>.png). docs/quality.md's close-ups are made with it; for
+``--out`` (default bench/out/closeup/<scene>-v<view>.png). docs/quality_log.md's close-ups are made with it; for
 example the robot's head: ``python bench/closeup.py playbot bench/out/recognise/s11-hue/playbot/woven_straw-fast-s0.ply
 bench/out/recognise/s12-dense/playbot/woven_straw-fast-s0.ply --box 0.33,0.33,0.67,0.72``.
 """

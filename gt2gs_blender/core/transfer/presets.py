@@ -53,7 +53,7 @@ def paper_schedule(rounds: int, half_round: tuple[int, int]) -> dict[str, Any]:
 LAYOUT: dict[str, Any] = dict(layout=True, texture_repeats=1.5, densify_grad_threshold=4e-4)
 """The texture laid on the object, 1.5 repeats across it, in the CPU presets: on the donut it takes the
 structure measure of bench/recognise.py from 0 to 1 of 6 textures in both top 3s (3 of 6 in the Gram
-top 3, from 1) at the same time (docs/quality.md); the paper's presets keep the paper's start. The layout
+top 3, from 1) at the same time (docs/quality_log.md); the paper's presets keep the paper's start. The layout
 term's hue gradient passes a colour-gradient threshold more often than the texture loss alone, so these
 presets densify above 4e-4 (2e-4 grew the donut 26 % more splats and its run 20 % longer for no content)."""
 
@@ -61,7 +61,7 @@ DENSE: dict[str, Any] = dict(dense_upscale=2.0)
 """A dense capture worked at up to twice the preset's resolution in ``fast`` and ``balanced``: on the guitar (~14
 splats behind each pixel at 256 px, worked at 480) and the 500,000-splat robot (~36, at 512) the scene kept in
 held-out views rises by 0.027 at about 2-2.8x the time, where the donut (3.4) keeps its size: forced to 512 px it lost
-content (docs/quality.md). ``preview`` stays small for a first look; the paper presets run at the paper's size."""
+content (docs/quality_log.md). ``preview`` stays small for a first look; the paper presets run at the paper's size."""
 
 PRESETS: dict[str, TransferConfig] = {
     "preview": TransferConfig(
