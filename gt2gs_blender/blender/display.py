@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..core.raster_rules import ALPHA_MAX, ALPHA_MIN, EPS2D
 from ..core.scene.inria import SH_C0
 from . import compat, views
 
@@ -29,11 +30,6 @@ MATERIAL_NAME = "GT2GS Splat Display v2"
 MODIFIER_NAME = "GT2GS Splats"
 TAG = "gt2gs_display"
 VERSION = 2
-ALPHA_MIN = 1.0 / 255.0
-ALPHA_MAX = 0.99
-EPS2D = 0.3
-"""Screen-space dilation (px²) of the rasterizer (core.render.projection.EPS2D), restated: blender/ may not
-import the torch side of core."""
 OPAQUE_AFTER = 128
 """Splat layers a Cycles ray crosses before the next splat it meets is drawn opaque (the Light Path node's
 transparent depth; EEVEE reports 0 and is unaffected). A ray behind the donut's front surface still crosses
@@ -44,7 +40,6 @@ TRANSPARENT_BOUNCES = 1024
 """Cycles transparent bounces (max = min, no Russian roulette, whose rare survivors speckle): only rays that keep
 passing through quad corners (alpha 0) after ``OPAQUE_AFTER`` layers get this far; the limit ends them (black)."""
 PREFIX = "gt2gs_"
-INPUTS = ("Density", "Points in Viewport", "Render Size", "Camera")
 
 Socket = bpy.types.NodeSocket
 

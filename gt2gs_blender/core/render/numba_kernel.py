@@ -17,16 +17,10 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from ..raster_rules import ALPHA_MAX, ALPHA_MIN, EPS2D, FOV_CLAMP, T_MIN, TILE
 from ..rotations import rotation_entries
 from ..scene.inria import SH_C0, SH_C1, SH_C2, SH_C3
 
-TILE = 8
-MAX_CHANNELS = 32
-EPS2D = 0.3
-FOV_CLAMP = 1.3
-ALPHA_MIN = 1.0 / 255.0
-ALPHA_MAX = 0.99
-T_MIN = 1e-4
 UNITS_PER_THREAD = 8
 """Forward work units per thread: tiles are dealt round-robin to units, which balances busy image centres."""
 JIT = {"cache": True, "nogil": True, "error_model": "numpy"}

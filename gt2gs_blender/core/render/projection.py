@@ -11,19 +11,13 @@ from dataclasses import dataclass
 
 import torch
 
+from ..raster_rules import ALPHA_MIN, EPS2D, FOV_CLAMP, TILE
 from ..scene.gaussians import quats_to_rotmats
 from .sh import eval_sh, sh0_to_rgb
 
-TILE = 8
 NEAR_PLANE = 0.01
 FAR_PLANE = 1e10
 """Default clipping depths of a render (camera-space z)."""
-ALPHA_MIN = 1.0 / 255.0
-EPS2D = 0.3
-"""Screen-space dilation (px^2) added to every 2D covariance, as in 3DGS (anti-aliasing floor)."""
-FOV_CLAMP = 1.3
-"""The EWA Jacobian is evaluated at most 30 % of tan(fov/2) outside the view frustum (3DGS, gsplat), which
-bounds the footprints of Gaussians far off-screen."""
 
 
 @dataclass

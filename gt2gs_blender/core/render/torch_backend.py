@@ -19,16 +19,15 @@ from dataclasses import dataclass
 import torch
 import torch.nn.functional as F
 
+from ..raster_rules import ALPHA_MAX, ALPHA_MIN, T_MIN, TILE
 from .binning import TileBins, bin_entries_torch
-from .projection import ALPHA_MIN, TILE, Projection, tile_grid
+from .projection import Projection, tile_grid
 
 CHUNK_MIN = 16
 CHUNK_MAX = 1024
 CHUNK_ELEMENTS = 1 << 20
 """A step covers (active tiles x chunk x 64) <= ~1M (entry, pixel) pairs so its working set stays
 in cache, but at least 16 entries per tile: per-step and per-tile costs outweigh list padding."""
-ALPHA_MAX = 0.99
-T_MIN = 1e-4
 PIX = TILE * TILE
 LOG2E = 1.0 / math.log(2.0)
 LOOP_MAX = 48
