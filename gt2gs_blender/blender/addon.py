@@ -6,6 +6,8 @@ import bpy
 
 ADDON_ID = __package__.rpartition(".")[0]
 """``gt2gs_blender`` from the source tree, ``bl_ext.<repository>.gt2gs_blender`` when installed."""
+ONLINE_ACCESS = "Allow Online Access (Preferences ▸ System ▸ Network)"
+"""Where Blender 4.2+ lets an extension reach the internet, for every message that needs it."""
 
 
 def preferences(context=None):

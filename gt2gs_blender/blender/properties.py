@@ -17,7 +17,8 @@ import bpy
 import numpy as np
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty, StringProperty
 
-from ..core.transfer.config import user_settings
+from ..core.features.specs import VGG16_RELU3, VGG19_NORM_RELU3
+from ..core.transfer.config import FORWARD_SPREAD_DEG, user_settings
 from ..core.transfer.presets import DEFAULT_PRESET, PRESETS
 from ..core.transfer.setting import DEGREES, IN_SCENE, Setting
 
@@ -25,8 +26,8 @@ DEFAULTS = PRESETS[DEFAULT_PRESET]
 ANGLE_DECIMALS = 4
 """Angles come back from Blender's float32 radians to a ten-thousandth of a degree."""
 PATH_SETTINGS = {
-    "weights_path": "Folder with VGG weights (vgg16-397923af.pth or vgg19_normalised_to_relu3_1.pth) or "
-    "one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"
+    "weights_path": f"Folder with VGG weights ({VGG16_RELU3.weight_files[0]} or {VGG19_NORM_RELU3.weight_files[0]}) "
+    "or one such file; empty: $GT2GS_WEIGHTS_DIR, then torch's cache"
 }
 """Path settings whose tooltip in Blender says more than the command line's."""
 CHOICE_HELP: dict[str, dict[str, str]] = {
@@ -40,7 +41,7 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
         "auto": "Estimated from the splats",
     },
     "layout_projection": {
-        "auto": "View when every view looks within 45° of the views' mean direction, else Box",
+        "auto": f"View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",
         "box": "Wraps the texture around an object seen from all sides",
         "view": "Throws the texture from the first view like a slide projector (a capture seen from the front)",
     },
@@ -51,8 +52,8 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
     },
     "features": {
         "auto": "The best network whose weights are found",
-        "vgg16_relu3": "VGG-16 features (torchvision's ImageNet weights, vgg16-397923af.pth)",
-        "vgg19_norm_relu3": "The normalised VGG-19 of style transfer (vgg19_normalised_to_relu3_1.pth)",
+        "vgg16_relu3": f"VGG-16 features (torchvision's ImageNet weights, {VGG16_RELU3.weight_files[0]})",
+        "vgg19_norm_relu3": f"The normalised VGG-19 of style transfer ({VGG19_NORM_RELU3.weight_files[0]})",
     },
     "device": {
         "auto": "A CUDA GPU when there is one, else the CPU",

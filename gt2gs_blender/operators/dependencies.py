@@ -43,7 +43,7 @@ class GT2GS_OT_install_dependencies(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         if not bpy.app.online_access:
-            cls.poll_message_set("Online access is disabled (Preferences ▸ System ▸ Network)")
+            cls.poll_message_set(f"Online access is disabled: {addon.ONLINE_ACCESS}")
             return False
         if addon.deps_dir() is None:
             cls.poll_message_set("Only the installed extension can install its dependencies")

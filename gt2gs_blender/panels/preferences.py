@@ -13,13 +13,14 @@ from bpy.props import EnumProperty
 
 from ..app import deps
 from ..blender import addon, machine, properties
+from ..core.features.specs import VGG16_RELU3
 from ..core.transfer.config import user_settings
 from ..core.transfer.setting import IN_PREFERENCES
 from ..operators import dependencies
 from ..operators import machine as machine_ops
 from .sections import draw_setting
 
-WEIGHTS_FILE = "vgg16-397923af.pth"
+WEIGHTS_FILE = VGG16_RELU3.weight_files[0]
 
 
 def _machine_changed(self, context) -> None:
@@ -89,7 +90,7 @@ def weights_offer(state: machine.MachineState, online: bool) -> tuple[bool, str]
         return False, "Downloading the VGG-16 weights…"
     if online:
         return True, f"Download them from {info.get('download_url')}, or {where}"
-    return False, f"Allow Online Access (Preferences ▸ System) to download them, or {where}"
+    return False, f"{addon.ONLINE_ACCESS} to download them, or {where}"
 
 
 class GT2GS_AP_preferences(bpy.types.AddonPreferences):
@@ -124,7 +125,7 @@ class GT2GS_AP_preferences(bpy.types.AddonPreferences):
         row.prop(self, "build", expand=True)
         row.operator(dependencies.GT2GS_OT_install_dependencies.bl_idname, icon="IMPORT")
         if not bpy.app.online_access:
-            box.label(text="Allow Online Access (Preferences ▸ System) to download packages", icon="INFO")
+            box.label(text=f"{addon.ONLINE_ACCESS} to download packages", icon="INFO")
         box = layout.box()
         box.label(text="What a Transfer Uses on This Machine")
         column = box.column(align=True)

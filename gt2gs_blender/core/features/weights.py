@@ -25,7 +25,7 @@ from ..errors import GT2GSError, InputFileError
 from .specs import FALLBACK_SEED, SPECS, VGG16_RELU3, VGG19_NORM_RELU3, FeatureSpec
 
 ENV_VAR = "GT2GS_WEIGHTS_DIR"
-VGG16_URL = "https://download.pytorch.org/models/vgg16-397923af.pth"
+VGG16_URL = f"https://download.pytorch.org/models/{VGG16_RELU3.weight_files[0]}"
 PARTIAL_FILES = {
     "vgg16_to_relu2_2.pth": "holds VGG-16 only up to relu2_2, not enough for the paper's relu3_1-relu3_3",
 }
