@@ -10,7 +10,7 @@ from bpy_extras.io_utils import ExportHelper
 
 from ..blender import splats
 from ..blender.registration import ClassesWithMenu
-from ..core.scene.files import FORMATS, PLY, WRITERS
+from ..core.scene.files import FORMATS, PLY, WRITE_EXTENSIONS, WRITERS
 from .io_import import engine_missing_message
 
 ENCODINGS = {
@@ -23,6 +23,8 @@ FILE_FORMATS = (
     *((fmt, FORMATS[fmt].label, f"{FORMATS[fmt].extensions[0]}: keeps {FORMATS[fmt].keeps}") for fmt in WRITERS),
 )
 
+MENU_ENDINGS = tuple(ext for ext in WRITE_EXTENSIONS if ext.count(".") == 1)
+"""The endings the File menu names (``.compressed.ply`` is a ``.ply``)."""
 EXPORT_GLOB = ";".join(f"*{FORMATS[fmt].extensions[0]}" for fmt in WRITERS)
 """What the file browser shows (Blender evaluates property annotations apart from the module's names)."""
 
@@ -148,12 +150,12 @@ class GT2GS_OT_export_ply(bpy.types.Operator, ExportHelper):
 
 def splat_stem(path: str) -> str:
     """A file path without its splat-format ending (``.compressed.ply`` whole)."""
-    endings = sorted((ext for fmt in WRITERS for ext in FORMATS[fmt].extensions), key=len, reverse=True)
+    endings = sorted(WRITE_EXTENSIONS, key=len, reverse=True)
     return next((path[: -len(ext)] for ext in endings if path.lower().endswith(ext)), path)
 
 
 def menu_func_export(self, context):
-    self.layout.operator(GT2GS_OT_export_ply.bl_idname, text="Gaussian Splat (.ply, .spz, .splat)")
+    self.layout.operator(GT2GS_OT_export_ply.bl_idname, text=f"Gaussian Splat ({', '.join(MENU_ENDINGS)})")
 
 
 _registration = ClassesWithMenu((GT2GS_OT_export_ply,), "TOPBAR_MT_file_export", menu_func_export)

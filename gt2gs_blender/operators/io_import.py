@@ -201,7 +201,7 @@ def _remove_objects(objects: list) -> None:
 
 
 def menu_func_import(self, context):
-    self.layout.operator(GT2GS_OT_import_ply.bl_idname, text="Gaussian Splat (.ply, .spz, .sog, .splat)")
+    self.layout.operator(GT2GS_OT_import_ply.bl_idname, text=f"Gaussian Splat ({', '.join(READ_EXTENSIONS)})")
 
 
 _registration = ClassesWithMenu((GT2GS_OT_import_ply, GT2GS_FH_ply), "TOPBAR_MT_file_import", menu_func_import)

@@ -8,13 +8,13 @@ from pathlib import Path
 from typing import Any
 
 from ...core.atomic import check_outputs
-from ...core.scene.files import FORMATS, WRITERS, output_format, read_splats, write_splats
+from ...core.scene.files import FORMATS, WRITE_EXTENSIONS, WRITERS, output_format, read_splats, write_splats
 from .args import scene_input, scene_options
 
 
 def add_convert_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     """The ``convert`` subcommand."""
-    writable = ", ".join(ext for fmt in WRITERS for ext in FORMATS[fmt].extensions)
+    writable = ", ".join(WRITE_EXTENSIONS)
     p = commands.add_parser(
         "convert",
         parents=[debug, scene_options()],

@@ -36,33 +36,27 @@ SOG_META = "meta.json"
 
 @dataclass(frozen=True)
 class SplatFormat:
-    """A splat file format: its names, what it keeps, and whether the tools write it."""
+    """A splat file format: its names and what it keeps (``WRITERS`` says which ones the tools write)."""
 
     label: str
     extensions: tuple[str, ...]
     keeps: str
-    max_sh_degree: int
-    writable: bool
 
 
 FORMATS: dict[str, SplatFormat] = {
-    PLY: SplatFormat("INRIA PLY", (".ply",), "everything: float32 values, SH degree 0-3, extra properties", 3, True),
+    PLY: SplatFormat("INRIA PLY", (".ply",), "everything: float32 values, SH degree 0-3, extra properties"),
     COMPRESSED_PLY: SplatFormat(
         "PlayCanvas compressed PLY",
         (".compressed.ply",),
         "positions and log scales to 11/10/11 bits of each 256-splat chunk's range, rotations to 3 x 10 bits, "
         "colour to 8 bits of the chunk's range, opacity to 8 bits, SH degree 0-3 to 8 bits (within +-4); no extra "
         "properties",
-        3,
-        True,
     ),
     SOG: SplatFormat(
         "PlayCanvas SOG",
         (".sog", SOG_META),
         "positions to 16 bits per axis (log-mapped), log scales, colours and SH bands through 256-entry codebooks, "
         "opacity to 8 bits, rotations to 3 x 8 bits; SH degree 0-3; read only",
-        3,
-        False,
     ),
     SPZ: SplatFormat(
         "Niantic SPZ",
@@ -70,16 +64,12 @@ FORMATS: dict[str, SplatFormat] = {
         "positions to 24-bit fixed point (1/4096), log scales, colour and opacity to 8 bits, rotations to 3 x 10 "
         "bits (3 x 8 in version 2), SH band 1 to 5 bits and bands 2-3 to 4 bits; no extra properties; reads "
         "versions 2-4, writes 3",
-        3,
-        True,
     ),
     SPLAT: SplatFormat(
         "antimatter15 .splat",
         (".splat",),
         "positions and scales as float32, colour, opacity and rotations to 8 bits; SH degree 0 only; no extra "
         "properties",
-        0,
-        True,
     ),
 }
 """The formats, by name; the README's table and ``info`` say the same from here."""
@@ -97,6 +87,8 @@ WRITERS: dict[str, Callable[[PathLike, object], list[str] | None]] = {
     SPZ: write_spz,
     SPLAT: write_splat,
 }
+WRITE_EXTENSIONS = tuple(ext for fmt in WRITERS for ext in FORMATS[fmt].extensions)
+"""File name endings the writers take, in ``WRITERS``' order (``.compressed.ply`` whole)."""
 READ_EXTENSIONS = tuple(
     sorted({"." + ext.rsplit(".", 1)[1] for fmt in FORMATS.values() for ext in fmt.extensions if ext != SOG_META})
 )
@@ -163,7 +155,7 @@ def read_scene(path: PathLike, *, drop_invalid: bool = False) -> GaussianScene:
 def output_format(path: PathLike, fmt: str | None = None) -> str:
     """The format to write ``path`` in: ``fmt``, else the one its name ends with; an error for one we only read,
     and for a name that ends with none (``out.txt`` would hold a PLY its name hides)."""
-    writable = ", ".join(ext for f in WRITERS for ext in FORMATS[f].extensions)
+    writable = ", ".join(WRITE_EXTENSIONS)
     if fmt is None:
         name = os.fspath(path).lower()
         fmt = next((f for f in (COMPRESSED_PLY, PLY, SPZ, SPLAT, SOG) if name.endswith(FORMATS[f].extensions)), None)
@@ -171,7 +163,7 @@ def output_format(path: PathLike, fmt: str | None = None) -> str:
             raise SplatFormatError(path, f"is not a splat file name; end it with one of {writable}")
     if fmt not in FORMATS:
         raise ValueError(f"unknown splat format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    if not FORMATS[fmt].writable:
+    if fmt not in WRITERS:
         raise SplatFormatError(path, f"{FORMATS[fmt].label} is read only here; write one of {writable}")
     return fmt
 
