@@ -150,8 +150,7 @@ def test_texture_match_counts_only_covered_cells():
     assert result["texture_match"] == pytest.approx(metrics.texture_match(rows, bank), abs=1e-6)
 
 
-def test_fps_and_peak_memory():
-    assert metrics.render_fps(wall_scene(10), sliding_cameras(2), backend="torch") > 0
+def test_peak_memory():
     memory = metrics.peak_memory_mib()
     assert memory["rss_peak_mib"] > 10 and memory["cuda_peak_mib"] is None
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass, replace
 
 import torch
 
+from ..scene.arrays import PARAMETERS as PARAM_NAMES
 from ..scene.gaussians import GaussianScene
 
-PARAM_NAMES = ("means", "quats", "log_scales", "opacity_logits", "sh_dc", "sh_rest")
 BACKOFF_AFTER = 3
 """Consecutive skipped steps after which the learning rates are halved."""
 MIN_LR_SCALE = 2.0**-10
@@ -172,10 +172,6 @@ class GaussianAdam:
                 self.exp_avg_sq[name] = v
         self.guard.allow(None, {})  # a taken step: ends a run of skipped ones, as step's does
         self.steps += 1
-
-    def grads_finite(self) -> bool:
-        """Whether every trainable tensor's gradient is finite (a missing gradient counts as zero)."""
-        return all(t.grad is None or bool(torch.isfinite(t.grad).all()) for t in self._trained().values())
 
     def step(self, loss: torch.Tensor | None = None) -> bool:
         """One Adam update of the trainable tensors on the unfrozen rows, at the learning rates times

@@ -23,7 +23,6 @@ Images are channels-last (V,H,W,3) in [0, 1], as the rasterizer renders them.
 from __future__ import annotations
 
 import sys
-import time
 from collections.abc import Sequence
 
 import numpy as np
@@ -201,24 +200,6 @@ def texture_match(features: torch.Tensor, bank_features: torch.Tensor, block_byt
         raise ValueError(f"texture_match needs (N,C) and (M,C) features, got {shapes}")
     nearest = nearest_features(features, bank_features, chunk_bytes=block_bytes)
     return float(cosine_distance(features, bank_features[nearest].to(features)).mean())
-
-
-@torch.no_grad()
-def render_fps(scene: GaussianScene, cameras: Sequence[Camera], *, backend: str = "auto") -> float:
-    """Frames per second rendering each camera alone (colour and depth), after one warm-up frame."""
-    render(scene, cameras[:1], backend=backend)
-    _synchronize(scene.device)
-    start = time.perf_counter()
-    for camera in cameras:
-        render(scene, [camera], backend=backend)
-    _synchronize(scene.device)
-    return len(cameras) / (time.perf_counter() - start)
-
-
-def _synchronize(device: torch.device) -> None:
-    """Wait for queued GPU work so that wall-clock timings are true."""
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
 
 
 def peak_memory_mib(device: torch.device | str = "cpu") -> dict[str, float | None]:
