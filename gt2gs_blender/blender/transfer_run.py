@@ -72,8 +72,8 @@ class RunError(Exception):
 
 @dataclass
 class Outcome:
-    """How the last run ended, for the panel: state, a message, the report, the result object's name, how the
-    result was applied (``NEW`` or ``IN_PLACE``) and the object it was made from (hidden under a new result)."""
+    """How the last run ended, for the panel: state, a message (which says where a new result's hidden original
+    is), the report, the result object's name and how the result was applied (``NEW`` or ``IN_PLACE``)."""
 
     state: str
     message: str
@@ -81,7 +81,6 @@ class Outcome:
     result: str | None = None
     seconds: float = 0.0
     mode: str = "NEW"
-    source: str | None = None
 
 
 ACTIVE: dict[str, TransferRun] = {}
@@ -89,11 +88,23 @@ OUTCOMES: dict[str, Outcome] = {}
 _previews: dict[str, Any] = {}
 
 
+NO_TARGET = "Select a Gaussian splat object"
+"""What the panels and the greyed-out operators say when there is no splat object to act on."""
+
+
 def target_object(context):
     """The splat object a run acts on: the panel's target, else the active object (None if not a splat)."""
     settings = context.scene.gt2gs
     obj = settings.target or context.active_object
     return obj if splats.is_splat_object(obj) else None
+
+
+def polled_target(cls, context):
+    """:func:`target_object` for an operator's poll, which says why it is greyed out when there is none."""
+    obj = target_object(context)
+    if obj is None:
+        cls.poll_message_set(NO_TARGET)
+    return obj
 
 
 def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str, Any]]:
@@ -415,7 +426,7 @@ class TransferRun:
             outcome = Outcome(CANCELLED, "cancelled; the scene is unchanged", seconds=seconds)
         else:
             outcome = Outcome(ERROR, status.error or "the transfer failed", seconds=seconds)
-        outcome.mode, outcome.source = self.result_mode, self.object_name
+        outcome.mode = self.result_mode
         if status.state == DONE and self.result_mode == "NEW" and self.result_name:
             outcome.message += f"; the original {self.object_name!r} is hidden (Alt+H shows it)"
         if ACTIVE.get(self.kind) is self:

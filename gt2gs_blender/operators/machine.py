@@ -15,8 +15,9 @@ POLL_S = 0.5
 START_DELAY_S = 1.0
 
 
-def _redraw() -> None:
-    for window in bpy.context.window_manager.windows:
+def redraw(context=None) -> None:
+    """Tag the 3D views and the preferences for a redraw: their panels show what a job or a check found."""
+    for window in (context or bpy.context).window_manager.windows:
         for area in window.screen.areas:
             if area.type in ("VIEW_3D", "PREFERENCES"):
                 area.tag_redraw()
@@ -26,7 +27,7 @@ def _wait_and_redraw() -> float | None:
     """Timer: redraw once the check has answered."""
     if machine.current().running is not None:
         return POLL_S
-    _redraw()
+    redraw()
     return None
 
 
@@ -62,7 +63,7 @@ class GT2GS_OT_download_weights(bpy.types.Operator):
     @classmethod
     def poll(cls, context):
         if not bpy.app.online_access:
-            cls.poll_message_set("Online access is disabled (Preferences ▸ System ▸ Network)")
+            cls.poll_message_set(f"Online access is disabled: {addon.ONLINE_ACCESS}")
             return False
         return machine.current().running is None
 

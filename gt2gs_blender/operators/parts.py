@@ -14,17 +14,9 @@ from bpy.props import BoolProperty, IntProperty
 from ..blender import parts, splats, transfer_run
 
 
-def _target(cls, context):
-    """The object a run restyles (the panel's target, else the active object), saying why not in the poll."""
-    obj = transfer_run.target_object(context)
-    if obj is None:
-        cls.poll_message_set("Select a Gaussian splat object")
-    return obj
-
-
 def _parts_found(cls, context) -> bool:
     """Poll of the selecting operators: a target whose parts were found (stale ones are refused when run)."""
-    if _target(cls, context) is None:
+    if transfer_run.polled_target(cls, context) is None:
         return False
     if not context.scene.gt2gs_parts.items:
         cls.poll_message_set("Find Parts first")
@@ -41,7 +33,7 @@ class GT2GS_OT_find_parts(bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        return _target(cls, context) is not None
+        return transfer_run.polled_target(cls, context) is not None
 
     def execute(self, context):
         obj = transfer_run.target_object(context)

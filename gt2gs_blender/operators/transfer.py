@@ -16,7 +16,8 @@ from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ..blender import transfer_run
 from ..blender.job import DONE, RUNNING
-from ..core.transfer.presets import PRESETS
+from ..core.transfer.config import SETTINGS
+from ..core.transfer.presets import PRESETS, preset
 from . import machine
 
 TIMER_S = 0.25
@@ -40,15 +41,15 @@ class RunOverrides:
     angle: FloatProperty(
         name="Orientation",
         options={"SKIP_SAVE"},
-        min=-360.0,
-        max=360.0,
+        min=SETTINGS["angle"].min,
+        max=SETTINGS["angle"].max,
         description="Texture angle in the first view, degrees (default: the panel's)",
     )
     n_views: IntProperty(
         name="Views",
         options={"SKIP_SAVE"},
-        min=1,
-        max=512,
+        min=int(SETTINGS["n_views"].min),
+        soft_max=int(SETTINGS["n_views"].soft_max),
         description="Use this many automatic views (default: the panel's views)",
     )
 
@@ -61,16 +62,14 @@ class RunOverrides:
         }
 
     def check_preset(self) -> str | None:
-        if self.properties.is_property_set("preset") and self.preset not in PRESETS:
-            return f"unknown preset {self.preset!r}; choose one of {', '.join(PRESETS)}"
+        """Why the preset a script named cannot run (None: none named, or a known one)."""
+        if not self.properties.is_property_set("preset"):
+            return None
+        try:
+            preset(self.preset)
+        except ValueError as exc:
+            return str(exc)
         return None
-
-
-def _redraw(context) -> None:
-    for window in context.window_manager.windows:
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                area.tag_redraw()
 
 
 def _start(op, context, kind: str) -> transfer_run.TransferRun | None:
@@ -129,10 +128,7 @@ class GT2GS_OT_transfer_texture(RunOverrides, bpy.types.Operator):
         if "transfer" in transfer_run.ACTIVE:
             cls.poll_message_set("A texture transfer is running")
             return False
-        if transfer_run.target_object(context) is None:
-            cls.poll_message_set("Select a Gaussian splat object")
-            return False
-        return True
+        return transfer_run.polled_target(cls, context) is not None
 
     def execute(self, context):
         run = _start(self, context, "transfer")
@@ -166,7 +162,7 @@ class GT2GS_OT_transfer_texture(RunOverrides, bpy.types.Operator):
         elif event.type != "TIMER":
             return {"PASS_THROUGH"}
         status = run.tick(context)
-        _redraw(context)
+        machine.redraw(context)
         if not status.finished:
             return {"PASS_THROUGH"}
         context.window_manager.event_timer_remove(self._timer)
@@ -196,10 +192,7 @@ class GT2GS_OT_preview_orientation(RunOverrides, bpy.types.Operator):
 
     @classmethod
     def poll(cls, context):
-        if transfer_run.target_object(context) is None:
-            cls.poll_message_set("Select a Gaussian splat object")
-            return False
-        return True
+        return transfer_run.polled_target(cls, context) is not None
 
     def execute(self, context):
         run = _start(self, context, "preview")
@@ -221,7 +214,7 @@ class GT2GS_OT_preview_orientation(RunOverrides, bpy.types.Operator):
                 return None  # superseded by a newer preview, which finished this one
             if run.tick(bpy.context).finished:
                 run.finish()
-                _redraw(bpy.context)
+                machine.redraw(bpy.context)
                 return None
             return TIMER_S
 

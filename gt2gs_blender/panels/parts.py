@@ -48,6 +48,8 @@ class GT2GS_UL_parts(bpy.types.UIList):
 
 
 class VIEW3D_PT_gt2gs_parts(bpy.types.Panel):
+    """Split the splat object into parts by colour and position, and pick one to restyle alone"""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = CATEGORY

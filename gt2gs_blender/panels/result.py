@@ -37,9 +37,9 @@ def weights_text(report: dict[str, Any]) -> str:
     return f"{weights.get('spec', '?')}" + (f" ({os.path.basename(file)})" if file else "")
 
 
-def result_location(name: str | None, mode: str, source: str | None = None) -> str:
-    """Where the result of a run is: the object (new, beside the hidden ``source``, or changed in place) and its
-    collection."""
+def result_location(name: str | None, mode: str) -> str:
+    """Where the result of a run is: the object (new, or changed in place) and its collection (the panel's message
+    says where a new one's hidden original is)."""
     if not name:
         return "-"
     obj = bpy.data.objects.get(name)
@@ -48,8 +48,7 @@ def result_location(name: str | None, mode: str, source: str | None = None) -> s
     where = obj.users_collection[0].name if obj.users_collection else "no collection"
     if mode == "IN_PLACE":
         return f"changed in place {name!r} in {where!r}"
-    hidden = f"; the original {source!r} is hidden (Alt+H shows it)" if source else ""
-    return f"new object {name!r} in {where!r}{hidden}"
+    return f"new object {name!r} in {where!r}"
 
 
 def report_rows(
@@ -57,15 +56,14 @@ def report_rows(
     result: str | None,
     seconds: float = 0.0,
     mode: str = "NEW",
-    source: str | None = None,
 ) -> list[tuple[str, str]]:
     """(label, value) rows summarising a run's report; ``seconds``: what the user waited, worker start included;
-    ``source``: the object a new result was made from (hidden)."""
+    ``mode``: how the result was applied."""
     if not report:
-        return [("Result", result_location(result, mode, source))] if result else []
+        return [("Result", result_location(result, mode))] if result else []
     width, height = report.get("image_size") or ("?", "?")
     rows = [
-        ("Result", result_location(result, mode, source)),
+        ("Result", result_location(result, mode)),
         ("Time", f"{seconds:.0f} s (texture transfer {report.get('seconds', 0.0):.0f} s)"),
         ("Splats", f"{report.get('n_gaussians', 0):,}"),
         ("Views", f"{report.get('n_views', '?')} at {width}×{height}"),
@@ -87,14 +85,17 @@ def report_rows(
 
 
 def result_view(last: transfer_run.Outcome | None, message: str, icon: str) -> ResultView:
-    """The Result sub-panel for the last transfer's outcome, with the main panel's message and icon for it."""
+    """The Result sub-panel for the last transfer's outcome: its rows, or when there are none (a failed or cancelled
+    run) the main panel's message and icon for it."""
     if last is None:
         return ResultView(NO_RUN_TEXT, "INFO")
-    rows = report_rows(last.report, last.result, last.seconds, last.mode, last.source) if last.state == DONE else []
-    return ResultView(message, icon, rows)
+    rows = report_rows(last.report, last.result, last.seconds, last.mode) if last.state == DONE else []
+    return ResultView("" if rows else message, icon, rows)
 
 
 class VIEW3D_PT_gt2gs_result(bpy.types.Panel):
+    """Where the last transfer's result is, how long it took and how much of the scene it kept"""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = CATEGORY
@@ -104,7 +105,8 @@ class VIEW3D_PT_gt2gs_result(bpy.types.Panel):
     def draw(self, context):
         main = current_view(context)
         view = result_view(transfer_run.OUTCOMES.get("transfer"), main.message, main.icon)
-        text_lines(self.layout, view.message, icon=view.icon)
+        if view.message:
+            text_lines(self.layout, view.message, icon=view.icon)
         value_rows(self.layout, view.rows)
 
 

@@ -191,7 +191,9 @@ def _draw_views_front(layout, context) -> None:
 
 
 def _draw_quality_front(layout, context) -> None:
-    layout.prop(context.scene.gt2gs, "lambda_content")
+    """Quality: how much of the scene's content the loss keeps."""
+    for name in front_settings("Quality"):
+        draw_setting(layout, context.scene.gt2gs, name, machine.current().info)
 
 
 FRONT_DRAW = {"Texture": _draw_texture_front, "Views": _draw_views_front, "Quality": _draw_quality_front}

@@ -97,7 +97,7 @@ FRONT_END = {
         ),
     ),
     "camera_collection": PointerProperty(
-        name="Camera Collection",
+        name="Collection",
         type=bpy.types.Collection,
         description="The collection whose cameras are the views, in the order of their names",
     ),
@@ -116,7 +116,9 @@ FRONT_END = {
     "auto_preview": BoolProperty(
         name="Live Orientation Preview",
         default=False,
-        description="Re-render the orientation preview whenever the angle or the texture size changes",
+        description="Re-render the orientation preview whenever something it shows changes: the angle, how the "
+        "texture is laid (its size, placement, softness, projection), how much of the scene it keeps, how finely "
+        "the splats are split, or which splats a run restyles",
     ),
     "result_mode": EnumProperty(
         name="Result",

@@ -10,10 +10,9 @@ import textwrap
 
 import bpy
 
-from ..blender import splats
+from ..blender import splats, transfer_run
 
 CATEGORY = "GT²"
-NO_SPLAT_TEXT = "Select a Gaussian splat object"
 LABEL_CHARS = 14
 """The longest label that fits a property's label column at Blender's default sidebar width and UI scale (a
 5.2 window cut "Split Splats Ab…" and "Texture Rotati…" at 15); a longer one gets a row of its own."""
@@ -60,6 +59,8 @@ def splat_rows(obj) -> list[tuple[str, str]] | None:
 
 
 class VIEW3D_PT_gt2gs_splat(bpy.types.Panel):
+    """What the selected splat object holds (its splats, SH degree, extra properties, file); import and export"""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = CATEGORY
@@ -69,7 +70,7 @@ class VIEW3D_PT_gt2gs_splat(bpy.types.Panel):
         layout = self.layout
         rows = splat_rows(context.active_object)
         if rows is None:
-            layout.label(text=NO_SPLAT_TEXT, icon="INFO")
+            layout.label(text=transfer_run.NO_TARGET, icon="INFO")
         else:
             value_rows(layout, rows)
         row = layout.row(align=True)

@@ -1,7 +1,7 @@
 """The GT² tab's Texture Transfer panel: target, preset, Transfer, Cancel, progress and warnings.
 
-Its sub-panels (``sections.py``: Texture, Views, Quality, Advanced; ``result.py``: Result) hold the
-rest. What it shows in each state (idle, no weights, running, done, error, no CUDA) comes from
+Its sub-panels (``sections.py``: Texture, Views, Quality, Advanced; ``parts.py``: Parts; ``result.py``: Result)
+hold the rest. What it shows in each state (idle, no weights, running, done, error, no CUDA) comes from
 ``transfer_view``, a plain function the tests check; ``draw`` only lays that out.
 """
 
@@ -63,7 +63,7 @@ def transfer_view(
         )
     can = target is not None and blocker is None
     if last is None:
-        message = "Select a Gaussian splat object" if target is None else f"{'Ready' if can else 'Not ready'}: {target}"
+        message = transfer_run.NO_TARGET if target is None else f"{'Ready' if can else 'Not ready'}: {target}"
         return TransferView(IDLE, can, False, message, ICONS[IDLE], warnings=shown)
     message = {
         DONE: last.message[:1].upper() + last.message[1:],
@@ -104,6 +104,8 @@ def current_view(context) -> TransferView:
 
 
 class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
+    """Re-texture the selected splat object with a texture photo (GT²-GS)"""
+
     bl_space_type = "VIEW_3D"
     bl_region_type = "UI"
     bl_category = CATEGORY

@@ -125,10 +125,9 @@ def test_transfer_operator_headless_adds_a_new_object(blob, capfd):
     assert job_folders() == folders
     outcome = transfer_run.OUTCOMES["transfer"]
     view = transfer_view(blob.name, None, outcome)
-    rows = dict(result_view(outcome, view.message, view.icon).rows)
-    assert view.state == DONE and rows["Result"] == (
-        "new object 'blob GT²' in 'Scene Collection'; the original 'blob' is hidden (Alt+H shows it)"
-    )
+    shown = result_view(outcome, view.message, view.icon)
+    assert view.state == DONE and dict(shown.rows)["Result"] == "new object 'blob GT²' in 'Scene Collection'"
+    assert shown.message == ""  # the main panel's message says it once, with the hidden original
     assert blob.hide_get() and result.visible_get()  # the result takes the original's place on screen
     assert re.fullmatch(r"Done in \d+ s; the original 'blob' is hidden \(Alt\+H shows it\)", view.message)
 
@@ -397,7 +396,8 @@ def test_transfer_view_in_each_state():
     error = transfer_view("donut", None, error_outcome)
     assert error.state == ERROR and error.icon == "ERROR" and error.can_transfer
     assert error.message == "Failed: the worker process exited with status 1"
-    assert not result_view(error_outcome, error.message, error.icon).rows
+    failed = result_view(error_outcome, error.message, error.icon)
+    assert not failed.rows and failed.message == error.message  # no rows: the sub-panel says why
     # no weights: a warning box before any run; no CUDA with a GPU-only preset: Transfer disabled, and why
     fallback = machine.MachineState(info={"cuda": False, "weights": {"fallback": True}})
     no_weights = transfer_view("donut", None, None, warnings=machine_warnings(fallback))
