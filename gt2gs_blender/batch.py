@@ -27,13 +27,19 @@ import bpy
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
+    """The script's options (after Blender's ``--``), the presets named as the registered extension has them."""
+    presets = extension_module("core.transfer.presets")
     parser = argparse.ArgumentParser(prog="blender -b --python batch.py --", description=__doc__.splitlines()[0])
     parser.add_argument("--ply", help="the 3DGS scene (.ply) to re-texture")
     parser.add_argument("--texture", help="the texture photograph")
     parser.add_argument("--out", required=True, help="where to write the re-textured .ply (with --manifest: a folder)")
     parser.add_argument("--manifest", help="a batch manifest (.csv or .toml) of jobs, in place of --ply and --texture")
     parser.add_argument("--resume", action="store_true", help="with --manifest: keep the jobs already done")
-    parser.add_argument("--preset", default="fast", help="preview, fast or balanced (default: fast)")
+    parser.add_argument(
+        "--preset",
+        default=presets.DEFAULT_PRESET,
+        help=f"one of {', '.join(presets.PRESETS)} (default: {presets.DEFAULT_PRESET})",
+    )
     parser.add_argument("--angle", type=float, help="texture orientation in the first view, degrees")
     parser.add_argument("--views", type=int, help="number of automatic views (default: the preset's)")
     parser.add_argument("--weights", help="folder with the VGG weights (default: $GT2GS_WEIGHTS_DIR)")
@@ -111,8 +117,8 @@ def check_paths(args: argparse.Namespace) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the batch job; the exit status (0 ok, 1 failure with one error line)."""
-    args = parse_args(script_args(sys.argv) if argv is None else argv)
     ensure_registered()
+    args = parse_args(script_args(sys.argv) if argv is None else argv)
     try:
         with contextlib.redirect_stdout(WithoutErrorEcho(sys.stdout)):
             if args.manifest is not None:

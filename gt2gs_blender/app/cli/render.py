@@ -30,8 +30,8 @@ from .args import add_scene_command, positive_float, positive_int, scene_input, 
 
 BATCH = 4
 """Cameras rendered per rasterizer call: enough to amortise the per-call set-up, little memory."""
-
-
+VIEWS, WIDTH = 8, 512
+"""Generated views: how many, and their width in pixels (square unless --height says otherwise)."""
 DEPTH_MIN_ALPHA = 0.1
 """Pixels less opaque than this have no meaningful depth; they are 0 in depth PNGs."""
 
@@ -57,8 +57,10 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         metavar="FILE_OR_DIR",
         help="cameras.json, poses_bounds.npy, a COLMAP model, or a folder holding one",
     )
-    source.add_argument("--views", type=positive_int, metavar="N", help="generate N views (default: 8)")
-    p.add_argument("--width", type=positive_int, metavar="W", help="generated views' width (default: 512)")
+    source.add_argument(
+        "--views", type=positive_int, default=VIEWS, metavar="N", help=f"generate N views (default: {VIEWS})"
+    )
+    p.add_argument("--width", type=positive_int, metavar="W", help=f"generated views' width (default: {WIDTH})")
     p.add_argument("--height", type=positive_int, metavar="H", help="generated views' height (default: W)")
     p.add_argument("--scale", type=positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
     p.add_argument(
@@ -98,7 +100,7 @@ def cmd_render(args: argparse.Namespace) -> None:
         require_input("cameras", args.cameras, folder=True)
         inputs.append(("cameras", args.cameras))
     given = _given_cameras(args)
-    outputs = render_outputs(args.output, len(given) if given is not None else args.views or 8, args.depth)
+    outputs = render_outputs(args.output, len(given) if given is not None else args.views, args.depth)
     check_outputs(outputs, inputs, new_folders=[args.output])
     scene = read_scene(args.scene, drop_invalid=args.drop_invalid)
     cameras = given if given is not None else _generated_cameras(args, scene)
@@ -139,8 +141,8 @@ def _generated_cameras(args: argparse.Namespace, scene: GaussianScene) -> list[C
     """Views generated around the scene; an empty one has nothing to place them around."""
     if len(scene) == 0:
         raise InputFileError(args.scene, "holds no splats: there is nothing to place generated views around")
-    width = args.width or 512
-    return auto_views(scene, args.views or 8, width=width, height=args.height or width, kind=args.kind, up=args.up)
+    width = args.width or WIDTH
+    return auto_views(scene, args.views, width=width, height=args.height or width, kind=args.kind, up=args.up)
 
 
 def _view_name(i: int) -> str:
