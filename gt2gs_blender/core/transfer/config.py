@@ -309,7 +309,13 @@ class TransferConfig(SpeedSettings):
         soft_max=0.05,
     )
     lambda_tv: float = setting(
-        0.02, "Smoothness", "Weight of the image smoothness (total variation) term", "stylise", min=0.0, soft_max=1.0
+        0.02,
+        "Smoothness",
+        "How strongly neighbouring pixels of the result are evened out (total variation): higher calms speckle, "
+        "lower keeps the finest grain",
+        "stylise",
+        min=0.0,
+        soft_max=1.0,
     )
     color_transfer: bool = setting(
         True, "Colour Transfer", "Match the scene's colours to the texture's before and after", "stylise"
@@ -374,7 +380,11 @@ class TransferConfig(SpeedSettings):
     seed: int = setting(0, "Seed", "Random seed of the run", "stylise", min=0)
     # -- GT²
     gt2: bool = setting(
-        True, "GT² Loss", "Carry the texture's orientation from view to view (off: plain NNFM matching)", "gt2"
+        True,
+        "GT² Loss",
+        "Carry the texture's scale and orientation from view to view, so it lies the same way in every view (off: "
+        "each view matches the texture on its own, the paper's NNFM baseline)",
+        "gt2",
     )
     angle: float = setting(
         0.0,

@@ -38,7 +38,8 @@ class SpeedSettings(MachineSettings):
     match_channels: int = setting(
         64,
         "Matching Channels",
-        "Match texture features on this many principal components (0 = all channels)",
+        "Compare the texture's features on this many of their strongest directions, which is faster and barely "
+        "changes the match (0: all channels, slower)",
         "speed",
         min=0,
         soft_max=256,
