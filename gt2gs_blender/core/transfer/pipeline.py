@@ -160,6 +160,23 @@ def keeps_scene_tones(config: TransferConfig) -> bool:
     return config.layout and keeps_scene(config)
 
 
+@dataclass
+class Prepared:
+    """What the ``prepare`` stage hands on: the plan, the working scene and rows it restyles, the shade the layout
+    keeps, the feature network, each view's targets, what the layout did (None: no layout), the start as the
+    orientation preview shows it (None: not measured) and how many splats there were before the layout split them."""
+
+    plan: RunPlan
+    work: GaussianScene
+    region: torch.Tensor | None
+    shade: torch.Tensor | None
+    extractor: FeatureExtractor
+    targets: list[ViewTargets]
+    laid_out: dict | None
+    start_view: np.ndarray | None
+    n_unsplit: int
+
+
 def _transfer(
     scene: GaussianScene,
     texture: np.ndarray | str | os.PathLike,
@@ -171,7 +188,48 @@ def _transfer(
     """The body of :func:`transfer`: plan the run, then prepare, build the bank, stylise and finish it."""
     torch.manual_seed(config.seed)
     tracker.begin("prepare")
-    plan = plan_run(scene, texture, views, config, region)
+    prepared = _prepare(plan_run(scene, texture, views, config, region))
+    plan, config = prepared.plan, prepared.plan.config
+    tracker.end()
+
+    tracker.begin("bank")
+    # the labelled bank serves GT² matching and the texture-match metric of every variant
+    image, device = plan.texture, plan.device
+    extractor = prepared.extractor
+    labelled = (
+        build_bank(image, extractor, config, device, tracker, config.depth_ratio)
+        if config.gt2 or config.evaluate
+        else None
+    )
+    bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, device)
+    matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
+    tracker.end()
+
+    tracker.begin("stylise")
+    frozen = None if prepared.region is None else ~prepared.region
+    carried = None if prepared.shade is None else {SHADE_ATTACHMENT: prepared.shade}
+    work, frozen, stats, attached = stylise(
+        prepared.work, plan.used, prepared.targets, matching, extractor, config, tracker, frozen, carried
+    )
+    tracker.end()
+
+    tracker.begin("finish")
+    work, metrics = _finish(prepared, work, frozen, stats, attached, labelled)
+    tracker.end()
+    report = _report(plan, tracker, work, extractor, bank, metrics)
+    report["stylise"] = {
+        **asdict(stats),
+        "n_gaussians_start": len(plan.original),
+        "region": None if plan.selected is None else int(plan.selected.sum()),
+    }
+    report["skips"] = _skips(plan, bank, matching, prepared.laid_out, stats)
+    tracker.tell(1, 1, "done")
+    return TransferResult(scene=work.to("cpu"), report=report)
+
+
+def _prepare(plan: RunPlan) -> Prepared:
+    """The ``prepare`` stage: the scene's own light and shade, the feature network, the layout (split and laid out,
+    as the preview shows it) and each view's targets."""
     config, frame, image = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
     # the scene's own light and shade, as the preview takes it
@@ -191,7 +249,8 @@ def _transfer(
     )
     n_work = len(work)
     laid_out = start_view = None
-    if frame is not None and config.layout:
+    exposure = 1.0
+    if laying:
         if splits_first(config):
             work, region, shade = split_for_detail(work, region, shade, frame, config)
         work = lay_out(work, region, plan.content, image, frame, config, shade)
@@ -199,70 +258,63 @@ def _transfer(
             # the run's start as the orientation preview shows it, kept for preview_ssim (no second layout)
             start = assemble(work, region, plan.start, plan.selected, plan.hidden, changed=True)
             start_view = first_view(plan, start, _side(plan.cameras[0]))
-        projected, split = config.layout_projection, len(work) - n_work
         exposure = 1.0 if shade is None else laid_exposure(shade, region)
         laid_out = {
-            "projection": projected,
+            "projection": config.layout_projection,
             "repeat_world": frame.repeat,
             "splats": len(work),
-            "split": split,
+            "split": len(work) - n_work,
             "exposure": exposure,  # Scene Brightness: below 1 a gain, above the power 1 / exposure
         }
     targets = view_targets(plan.used, work, extractor, config, config.backend)
-    if frame is not None and config.layout and config.lambda_layout > 0:
+    if laying and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
         ideal = layout_images(
             plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour, exposure, lit
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
-    tracker.end()
+    return Prepared(plan, work, region, shade, extractor, targets, laid_out, start_view, n_work)
 
-    tracker.begin("bank")
-    # the labelled bank serves GT² matching and the texture-match metric of every variant
-    labelled = (
-        build_bank(image, extractor, config, plan.device, tracker, config.depth_ratio)
-        if config.gt2 or config.evaluate
-        else None
-    )
-    bank = labelled if config.gt2 else nnfm_bank(image, extractor, config, plan.device)
-    matching = compact_bank(bank, config.dedup_threshold, config.match_channels)
-    tracker.end()
 
-    tracker.begin("stylise")
-    frozen = None if region is None else ~region
-    carried = None if shade is None else {SHADE_ATTACHMENT: shade}
-    work, frozen, stats, attached = stylise(
-        work, plan.used, targets, matching, extractor, config, tracker, frozen, carried
-    )
-    tracker.end()
-
-    tracker.begin("finish")
+def _finish(
+    prepared: Prepared,
+    work: GaussianScene,
+    frozen: torch.Tensor | None,
+    stats: StyliseStats,
+    attached: dict[str, torch.Tensor],
+    labelled: TextureBank | None,
+) -> tuple[GaussianScene, dict | None]:
+    """The ``finish`` stage: the detail split when it comes last, the closing colour transfer, the result put back
+    into the whole scene, and its metrics (None when not evaluating)."""
+    plan, config = prepared.plan, prepared.plan.config
     restyled = None if frozen is None else ~frozen
     if splits_last(config):
         n_optimised = len(work)
         start_colours, shade = attached[COLOR_ATTACHMENT], attached.get(SHADE_ATTACHMENT)
-        work, restyled = add_detail(work, start_colours, restyled, plan.content, image, frame, config, shade)
-        laid_out.update(splats=len(work), split=len(work) - n_optimised)
+        work, restyled = add_detail(
+            work, start_colours, restyled, plan.content, plan.texture, plan.frame, config, shade
+        )
+        prepared.laid_out.update(splats=len(work), split=len(work) - n_optimised)
     if config.color_transfer and not keeps_scene_tones(config):
         stylised_views = render_views(work, plan.cameras, plan.background, config.backend)
-        work = apply_color_transfer(work, stylised_views, image, restyled, config.backend)
-    changed = structure_changed(stats) or len(work) != n_work
+        work = apply_color_transfer(work, stylised_views, plan.texture, restyled, config.backend)
+    changed = structure_changed(stats) or len(work) != prepared.n_unsplit
     work = assemble(work, restyled, plan.start, plan.selected, plan.hidden, changed)
-    metrics = None
-    if config.evaluate and labelled is not None:  # always built when evaluating
-        metrics = _evaluate(work, plan, targets, labelled, extractor, config)
-        shown = start_view if start_view is not None else show(plan, size=_side(plan.cameras[0])).image
-        metrics["preview_ssim"] = preview_ssim(work, shown, plan.cameras[0], plan.background, config.backend)
-    tracker.end()
-    report = _report(plan, tracker, work, extractor, bank, metrics)
-    report["stylise"] = {
-        **asdict(stats),
-        "n_gaussians_start": len(plan.original),
-        "region": None if plan.selected is None else int(plan.selected.sum()),
-    }
-    report["skips"] = {
+    if not config.evaluate or labelled is None:  # always built when evaluating
+        return work, None
+    metrics = _evaluate(work, plan, prepared.targets, labelled, prepared.extractor, config)
+    shown = prepared.start_view
+    if shown is None:
+        shown = show(plan, size=_side(plan.cameras[0])).image
+    metrics["preview_ssim"] = preview_ssim(work, shown, plan.cameras[0], plan.background, config.backend)
+    return work, metrics
+
+
+def _skips(plan: RunPlan, bank: TextureBank, matching: TextureBank, laid_out: dict | None, stats: StyliseStats) -> dict:
+    """The report's ``skips``: what the run left out or cut short, and what the layout did."""
+    return {
         "hidden": None if plan.hidden is None else int(plan.hidden.sum()),
-        "sh_degree": [plan.original.sh_degree, content_degree(plan.original, config)],
+        "sh_degree": [plan.original.sh_degree, content_degree(plan.original, plan.config)],
         "bank_angles": len(bank.angles),
         "bank_rows_matched": len(matching),
         "match_channels": None if matching.match_basis is None else int(matching.match_basis.shape[1]),
@@ -270,8 +322,6 @@ def _transfer(
         "layout": laid_out,
         "plateau_skipped": dict(stats.plateau_skipped),
     }
-    tracker.tell(1, 1, "done")
-    return TransferResult(scene=work.to("cpu"), report=report)
 
 
 @torch.no_grad()
