@@ -178,6 +178,18 @@ def test_non_finite_gaussians_are_rejected_with_counts_or_dropped_and_reported(t
     assert all(bool(torch.isfinite(t).all()) for t in scene.tensors().values())
 
 
+@pytest.mark.parametrize("name", ["nan.ply", "nan.compressed.ply", "nan.spz", "nan.splat"])
+def test_no_writer_writes_what_no_reader_takes_back(tmp_path, name):
+    """A file the project writes, it can read back: every format refuses NaN or Inf splats, naming the file."""
+    scene = torus_scene(n_major=8, n_minor=4)
+    means = scene.means.detach().clone()
+    means[3, 0] = float("nan")
+    with pytest.raises(InputFileError, match="1 of 32 Gaussians have NaN or Inf values") as info:
+        write_splats(tmp_path / name, replace(scene, means=means))
+    assert_names_file(info.value, tmp_path / name)
+    assert list(tmp_path.iterdir()) == []
+
+
 # -- camera files ----------------------------------------------------------------------------------
 
 

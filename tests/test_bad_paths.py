@@ -377,6 +377,35 @@ def test_an_output_whose_name_hides_what_it_holds_is_refused_before_any_work(cap
 def test_convert_with_a_format_given_writes_any_name(capsys, world):
     assert cli.main(["convert", "scene.ply", "scene.bin", "--format", "spz"]) == 0
     assert Path("scene.bin").read_bytes()[:2] == b"\x1f\x8b"  # SPZ: a gzip stream
+    assert cli.main(["info", "scene.bin"]) == 0  # read back by its content
+
+
+def test_a_splat_file_must_be_named_so_to_be_read_back(capsys, world):
+    """A .splat has no signature: readers know it by its name, so another name is refused before any work."""
+    assert ".splat" in refused(capsys, world, ["convert", "scene.ply", "scene.bin", "--format", "splat"], "scene.bin")
+
+
+def test_a_read_only_output_is_refused_and_kept(capsys, world):
+    """Permission bits that say "read-only" are honoured even by root, whose writes they would not stop."""
+    write_splats("old.ply", torus_scene(n_major=8, n_minor=4))
+    os.chmod("old.ply", 0o444)
+    assert "read-only" in refused(capsys, world, ["convert", "scene.spz", "old.ply"], "old.ply")
+
+
+def test_an_output_written_over_a_file_keeps_its_permissions(capsys, world):
+    write_splats("private.ply", torus_scene(n_major=8, n_minor=4))
+    os.chmod("private.ply", 0o600)
+    assert cli.main(["convert", "scene.spz", "private.ply"]) == 0
+    assert os.stat("private.ply").st_mode & 0o777 == 0o600
+    assert cli.main(["convert", "scene.spz", "fresh.ply"]) == 0  # a new file: the umask's permissions
+    assert os.stat("fresh.ply").st_mode & 0o777 == 0o666 & ~_umask()
+
+
+def _umask() -> int:
+    """This process's umask (read by setting it and back)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def test_transfer_whose_last_output_fails_leaves_none(capsys, world, monkeypatch):

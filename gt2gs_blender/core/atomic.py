@@ -121,9 +121,9 @@ def all_or_nothing(outputs: Iterable[PathLike], new_folders: Sequence[PathLike] 
 def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | str) -> None:
     """Write ``chunks`` (buffers: bytes, memoryviews, numpy arrays; or one str as UTF-8) atomically.
 
-    The temp file is created with ordinary umask permissions and is removed on any failure, so a
-    failed or interrupted write leaves the old file (if any) untouched and nothing behind; an error names
-    ``path``, never the temp file. Inside :func:`all_or_nothing` the rename waits for the block's end.
+    The temp file is created with ordinary umask permissions (a file it replaces keeps its own) and is removed
+    on any failure, so a failed or interrupted write leaves the old file (if any) untouched and nothing behind; an
+    error names ``path``, never the temp file. Inside :func:`all_or_nothing` the rename waits for the block's end.
     """
     path = Path(path)
     if isinstance(chunks, str):
@@ -137,6 +137,7 @@ def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | 
             with os.fdopen(fd, "wb") as f:
                 for chunk in chunks:
                     f.write(chunk)
+            _keep_mode(tmp, path)
             _finish(tmp, path)
         except BaseException:
             tmp.unlink(missing_ok=True)
@@ -145,6 +146,12 @@ def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | 
         if exc.errno is None or exc.filename not in (None, str(tmp), os.fspath(path)):
             raise
         raise OSError(exc.errno, exc.strerror, os.fspath(path)) from exc
+
+
+def _keep_mode(tmp: Path, path: Path) -> None:
+    """Give the temp file the permissions of the file it will replace (a private file stays private)."""
+    with contextlib.suppress(FileNotFoundError):
+        os.chmod(tmp, stat.S_IMODE(os.stat(path).st_mode))
 
 
 def _finish(tmp: Path, path: Path) -> None:
@@ -205,6 +212,8 @@ def _require_file_writable(path: Path, *, in_new_folder: bool) -> None:
         raise InputFileError(path, f"cannot be written: {_reason(exc, path.parent)}") from None
     if mode is not None and not stat.S_ISREG(mode):
         raise InputFileError(path, f"cannot be written: it is {_kind(mode)}; name a file")
+    if mode is not None and not mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH):
+        raise InputFileError(path, "cannot be written: the file is read-only; make it writable or choose another path")
     if not in_new_folder:
         _probe(path, path.parent)
 

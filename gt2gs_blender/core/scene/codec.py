@@ -189,8 +189,8 @@ def inflate(path: PathLike, data: bytes, size: int) -> bytes:
 
 
 def require_finite(path: PathLike, arrays: SplatArrays, fmt: str) -> None:
-    """A scene with NaN/Inf values cannot be quantised (a NaN would spoil a whole range): an error naming the
-    file that was to be written."""
+    """A scene with NaN/Inf values is not written: it cannot be quantised (a NaN would spoil a whole range) and no
+    reader here takes it back; an error naming the file that was to be written."""
     n = len(arrays)
     finite = np.ones(n, bool)
     for values in arrays.tensors().values():
@@ -198,7 +198,7 @@ def require_finite(path: PathLike, arrays: SplatArrays, fmt: str) -> None:
             finite &= np.isfinite(values).reshape(n, -1).all(axis=1)
     if not finite.all():
         bad = n - int(finite.sum())
-        raise SplatFormatError(path, f"{bad} of {n} Gaussians have NaN or Inf values, which {fmt} cannot store")
+        raise SplatFormatError(path, f"{bad} of {n} Gaussians have NaN or Inf values; {fmt} files hold finite ones")
 
 
 def read_bytes(path: PathLike) -> bytes:

@@ -165,6 +165,10 @@ def output_format(path: PathLike, fmt: str | None = None) -> str:
         raise ValueError(f"unknown splat format {fmt!r}; choose one of {', '.join(FORMATS)}")
     if fmt not in WRITERS:
         raise SplatFormatError(path, f"{FORMATS[fmt].label} is read only here; write one of {writable}")
+    if fmt == SPLAT and not os.fspath(path).lower().endswith(FORMATS[SPLAT].extensions):
+        raise SplatFormatError(
+            path, "a .splat file is known by its name alone (it has no signature): end it with .splat"
+        )
     return fmt
 
 

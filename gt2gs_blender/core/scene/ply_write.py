@@ -13,6 +13,7 @@ from ..atomic import atomic_write
 if TYPE_CHECKING:
     from .gaussians import GaussianScene
 from .arrays import SplatArrays
+from .codec import as_arrays, require_finite
 from .inria import NORMAL_NAMES, REST_PREFIX, core_groups, core_property_names, tensor_view
 from .ply import _field_block, _record_dtype
 from .ply_header import _PROPERTY_NAME, FORMATS, SCALAR_TYPES, TYPE_FOR_CODE, PathLike, type_code
@@ -21,9 +22,11 @@ _ASCII_FORMAT = {"f4": "%.9g", "f8": "%.17g"}  # enough digits to read back exac
 
 
 def write_ply(path: PathLike, scene: GaussianScene | SplatArrays, *, fmt: str = "binary_little_endian") -> None:
-    """Write a scene (torch ``GaussianScene`` or numpy ``SplatArrays``) atomically; it is not modified."""
+    """Write a scene (torch ``GaussianScene`` or numpy ``SplatArrays``) atomically; it is not modified. NaN or Inf
+    values are refused, as every reader here would refuse the file."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown PLY format {fmt!r}; use one of {', '.join(FORMATS)}")
+    require_finite(path, as_arrays(scene), "PLY")
     layout = write_layout(scene)
     records = _records(scene, layout, FORMATS[fmt])
     header = "".join(
