@@ -16,6 +16,9 @@ import hashlib
 import os
 import signal
 import socket
+import subprocess
+import sys
+import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -444,6 +447,30 @@ def test_render_failing_midway_leaves_no_view_and_no_folder(capsys, world, monke
     assert cli.main(argv) == 2
     assert "view_002.png: Input/output error" in capsys.readouterr().err
     assert snapshot(world) == before  # the two views written are gone, and the folders made for them
+
+
+@pytest.mark.parametrize("signum", cli.STOP_SIGNALS, ids=lambda signum: signal.Signals(signum).name)
+def test_a_command_stopped_by_a_signal_leaves_nothing_half_written(tmp_path, signum):
+    """SIGTERM or SIGHUP (``kill``, a closed terminal) while a render writes its views: the command unwinds as
+    Ctrl-C does, so the views written so far and the folder made for them are removed, and it exits 128 + N."""
+    write_splats(tmp_path / "scene.ply", torus_scene(n_major=120, n_minor=60))
+    argv = ["render", str(tmp_path / "scene.ply"), "-o", str(tmp_path / "views"), "--views", "200", "--width", "256"]
+    repo = Path(__file__).resolve().parents[1]
+    with subprocess.Popen(
+        [sys.executable, "-m", "gt2gs_blender", *argv, "--backend", "torch"],
+        cwd=repo,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    ) as command:
+        deadline = time.monotonic() + 120
+        while not list(tmp_path.glob("views/.*.tmp")) and command.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.02)
+        command.send_signal(signum)
+        _, err = command.communicate(timeout=60)
+    assert command.returncode == 128 + signum, err
+    assert err.strip().splitlines()[-1] == f"gt2gs: error: stopped by {signal.Signals(signum).name}"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.ply"]
 
 
 def test_atomic_errors_name_the_target_never_the_temp_file(tmp_path):

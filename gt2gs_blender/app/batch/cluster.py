@@ -261,7 +261,7 @@ def _run(
                 board.end(rows[job.name])
             time.sleep(POLL_S)
     except KeyboardInterrupt:
-        board.say("interrupted: cancelling the batch (the running jobs stop and write nothing)")
+        board.say("interrupted: cancelling the batch (running jobs stop and write nothing; one saving finishes)")
         finished_now = [f for f in futures if f.status == "finished" and futures[f].name not in rows]
         _cancel(client, batch, [f for f in futures if f not in finished_now])
         deadline = time.monotonic() + CANCEL_GRACE_S

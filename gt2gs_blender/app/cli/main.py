@@ -3,7 +3,9 @@ batch of many), run the demo, fit one.
 
 Errors the user can fix (bad files, bad arguments, a job too large for the memory) print one line on stderr
 and exit with 2; any other exception is a bug, also reported in one line, with exit code 1; ``--debug`` adds
-the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``.
+the traceback. Rasterizer warnings (e.g. a backend falling back) are shown as ``gt2gs: warning: ...``. SIGTERM and
+SIGHUP (a closed terminal, ``kill``, a job scheduler's time limit) stop a command as Ctrl-C does: what it was
+writing is removed, and it exits with 128 + the signal's number.
 """
 
 from __future__ import annotations
@@ -12,7 +14,9 @@ import argparse
 import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from collections.abc import Iterator, Sequence
@@ -46,9 +50,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:  # --help (0) or a usage error argparse already printed (2)
         return exc.code if isinstance(exc.code, int) else EXIT_USER
-    with _reporting_to_stderr():
+    with _reporting_to_stderr(), _stopping_on_signals():
         try:
             args.run(args)
+        except Stopped as exc:
+            return _fail(args.debug, f"stopped by {signal.Signals(exc.signum).name}", 128 + exc.signum)
         except KeyboardInterrupt:
             return _fail(args.debug, "interrupted", 130)
         except BrokenPipeError:  # the reader stopped reading (``| head``): nothing went wrong here
@@ -62,6 +68,37 @@ def main(argv: Sequence[str] | None = None) -> int:
             hint = "" if args.debug else " (run with --debug for the traceback)"
             return _fail(args.debug, f"internal error{hint}: {type(exc).__name__}: {exc}", EXIT_INTERNAL)
     return 0
+
+
+class Stopped(KeyboardInterrupt):
+    """A termination signal, raised where the command is, so it unwinds as Ctrl-C does (temp files removed)."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGTERM", "SIGHUP") if hasattr(signal, name))
+"""The signals that stop a command cleanly (SIGHUP does not exist on Windows)."""
+
+
+@contextlib.contextmanager
+def _stopping_on_signals() -> Iterator[None]:
+    """Turn ``STOP_SIGNALS`` into :class:`Stopped` for the command's run (the main thread only: Python delivers
+    signals there); the previous handlers come back after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: object) -> NoReturn:
+        raise Stopped(signum)
+
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 class OneLineParser(argparse.ArgumentParser):
