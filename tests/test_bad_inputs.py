@@ -42,7 +42,7 @@ from gt2gs_blender.core.scene.ply_write import write_ply
 from gt2gs_blender.core.transfer.color_transfer import apply_to_scene, fit_color_transform
 from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.pipeline import transfer
-from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture
+from gt2gs_blender.core.transfer.texture import MAX_SIDE, load_texture, texture_from_array
 from gt2gs_blender.core.transfer.visibility import require_visible
 
 from .splat_tools import core_names
@@ -446,6 +446,31 @@ def test_non_finite_float_texture_samples_are_replaced_with_a_warning(tmp_path):
         texture = load_texture(path)
     assert np.isfinite(texture).all()
     assert texture[10, 10].tolist() == [0.0, 0.0, 0.0] and texture[20, 20, 1] == 1.0 and texture[0, 0, 0] == 0.25
+
+
+def test_a_texture_strip_too_long_to_turn_is_one_line_naming_it(tmp_path, capsys):
+    """An 8000 x 4 px strip once reached OpenCV's 32,767 px limit deep in the texture bank (an internal error)."""
+    path = encode(tmp_path / "strip.png", np.random.default_rng(0).integers(0, 255, (4, 8000, 3), dtype=np.uint8))
+    with pytest.raises(InputFileError, match="8000x4 px, longer than 16:1") as info:
+        load_texture(path)
+    assert_names_file(info.value, path)
+    scene = tmp_path / "scene.ply"
+    write_splats(scene, torus_scene(n_major=8, n_minor=4))
+    assert cli.main(["transfer", str(scene), str(path), "-o", str(tmp_path / "out.ply"), "--preset", "preview"]) == 2
+    assert capsys.readouterr().err.strip() == f"gt2gs: error: {info.value}"
+
+
+def test_a_texture_array_is_held_to_a_texture_files_rules():
+    image = np.full((64, 64, 3), 0.25, np.float32)
+    image[3, 3] = np.nan
+    with pytest.warns(UserWarning, match="the texture array: 3 NaN/Inf texture samples were replaced"):
+        texture = texture_from_array(image)
+    assert np.isfinite(texture).all() and texture[3, 3].tolist() == [0.0, 0.0, 0.0]
+    assert np.array_equal(texture_from_array(np.full((8, 8, 4), 255, np.uint8)), np.ones((8, 8, 3), np.float32))
+    with pytest.raises(InputFileError, match=r"the texture array: has shape \(64, 64\); give an \(H, W, 3\)"):
+        texture_from_array(image[..., 0])
+    with pytest.raises(InputFileError, match="longer than 16:1"):
+        texture_from_array(np.zeros((2, 64, 3)))
 
 
 MAGIC = [b"", b"\x89PNG\r\n\x1a\n", b"\xff\xd8\xff", b"II*\x00", b"BM", b"RIFF\x00\x00\x00\x00WEBP", b"v/1\x01"]

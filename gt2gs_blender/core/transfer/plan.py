@@ -34,7 +34,7 @@ from .region import region_mask, stylise_start, visible_rows
 from .resolution import working_resolution
 from .skips import redundant_views
 from .stylise import moves_splats
-from .texture import load_texture
+from .texture import read_texture
 from .views import ViewSet, fit_cameras
 
 RESOLVED = ("up", "resolution", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
@@ -140,13 +140,7 @@ def plan_run(
 def run_texture(texture: np.ndarray | str | os.PathLike, config: TransferConfig) -> np.ndarray:
     """The texture as a run with ``config`` reads it (a path loaded, an array checked), softened by its
     ``texture_softness``: what the layout, the bank, the texture loss and the preview all see."""
-    image = load_texture(texture) if not isinstance(texture, np.ndarray) else _texture_array(texture)
-    return softened(image, config.texture_softness)
-
-
-def _texture_array(texture: np.ndarray) -> np.ndarray:
-    """A caller's texture array as the run reads it: RGB, float32, contiguous."""
-    return np.ascontiguousarray(texture[..., :3], dtype=np.float32)
+    return softened(read_texture(texture), config.texture_softness)
 
 
 def _dropped_views(content: ViewSet, config: TransferConfig) -> list[int]:

@@ -40,6 +40,13 @@ CONSTANT_STD = 1e-3
 MAX_SIDE = 8192
 """Textures with a longer side are downscaled to this many pixels."""
 
+MAX_ASPECT = 16
+"""A texture at most this many times as long as it is wide: the bank scales it to the run's texture size and turns
+it, and a longer strip holds too little across to turn (its scaled length also passes OpenCV's 32,767 px warps)."""
+
+ARRAY_NAME = "the texture array"
+"""What errors and warnings call a texture a caller passed as an array (it has no file name)."""
+
 
 def load_texture(path: str | os.PathLike) -> np.ndarray:
     """The image at ``path`` as an (H, W, 3) float32 RGB array in [0, 1].
@@ -53,7 +60,26 @@ def load_texture(path: str | os.PathLike) -> np.ndarray:
         raise InputFileError(path, f"cannot read the texture ({exc.strerror or exc})") from exc
     image = _limit_size(_decode(data, path), path)
     rgb = _to_rgb01(image, path)
+    _require_tileable(rgb, path)
     _warn_if_unusable(rgb, path)
+    return rgb
+
+
+def read_texture(texture: np.ndarray | str | os.PathLike) -> np.ndarray:
+    """A texture given as a file (:func:`load_texture`) or as an array (:func:`texture_from_array`)."""
+    return texture_from_array(texture) if isinstance(texture, np.ndarray) else load_texture(texture)
+
+
+def texture_from_array(texture: np.ndarray) -> np.ndarray:
+    """A caller's (H, W, 3+) texture array as a run reads it (RGB float32 in [0, 1], contiguous), held to a texture
+    file's rules: integers scaled to [0, 1], NaN/Inf replaced and values clipped with a warning, a long strip
+    refused."""
+    array = np.asarray(texture)
+    if array.ndim != 3 or array.shape[2] < 3 or min(array.shape[:2]) < 1:
+        raise InputFileError(ARRAY_NAME, f"has shape {array.shape}; give an (H, W, 3) RGB array")
+    rgb = np.ascontiguousarray(_unit_range(array[..., :3], ARRAY_NAME))
+    _require_tileable(rgb, ARRAY_NAME)
+    _warn_if_unusable(rgb, ARRAY_NAME)
     return rgb
 
 
@@ -161,6 +187,15 @@ def _composite_alpha(colour: np.ndarray, alpha: np.ndarray, path: str | os.PathL
         warnings.warn(f"{os.fspath(path)}: {_transparency(alpha)}; composited over its mean colour", stacklevel=2)
         return (colour * a + mean.astype(np.float32) * (1.0 - a)).astype(np.float32)
     return colour
+
+
+def _require_tileable(rgb: np.ndarray, path: str | os.PathLike) -> None:
+    """Refuse a strip longer than ``MAX_ASPECT``: one line naming the texture, not an error deep in the bank."""
+    height, width = rgb.shape[:2]
+    if max(height, width) > MAX_ASPECT * min(height, width):
+        raise InputFileError(
+            path, f"the texture is {width}x{height} px, longer than {MAX_ASPECT}:1; crop it to a more even shape"
+        )
 
 
 def _warn_if_unusable(rgb: np.ndarray, path: str | os.PathLike) -> None:
