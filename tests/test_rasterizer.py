@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 import torch
 
+from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.errors import GT2GSError
 from gt2gs_blender.core.render import available_backends, gsplat_backend, numba_backend, rasterization, render
-from gt2gs_blender.core.scene.gaussians import quats_to_rotmats
+from gt2gs_blender.core.scene.gaussians import GaussianScene, quats_to_rotmats
 from gt2gs_blender.core.scene.ply import read_ply
 
 from .reference import frustum_clamp, render_reference, support_radius
@@ -348,6 +350,22 @@ def assert_same_footprints(got: dict, want: dict, *, seen: float, means_tol: flo
     assert torch.allclose(stacked["g"][0], stacked["w"][0], atol=means_tol)
     g, w = stacked["g"][1], stacked["w"][1]
     assert torch.linalg.norm(g - w) <= grad_rel * torch.linalg.norm(w)
+
+
+@pytest.mark.parametrize("backend", [b for b in BACKENDS if b != "torch"])
+def test_a_render_past_the_kernels_pair_limit_is_one_error_saying_what_to_shrink(backend):
+    """1,500 splats each covering every tile of one 10,000 px view: over 2^31 splat/tile pairs, counted before any
+    is stored. The kernel's own words ("render fewer cameras at once") misled with a single camera."""
+    n, side = 1500, 10000
+    scene = GaussianScene.from_activated(
+        means=torch.tensor([[0.0, 0.0, 3.0]]).repeat(n, 1),
+        scales=torch.full((n, 3), 5.0),
+        opacities=torch.full((n,), 0.9),
+        colors=torch.rand(n, 3),
+    )
+    camera = Camera.from_cam_to_world(np.eye(3), [0.0, 0.0, 0.0], side / 2, side / 2, side / 2, side / 2, side, side)
+    with pytest.raises(GT2GSError, match=r"too large for the rasterizer \(1 view of 10000x10000 px: over 2\^31"):
+        render(scene, [camera], backend=backend)
 
 
 @pytest.mark.parametrize("backend", [b for b in BACKENDS if b != "torch"])

@@ -10,10 +10,13 @@ from typing import Any
 
 import torch
 
+from ..errors import GT2GSError
 from . import kernel_cache
 from .binning import TileBins
 from .projection import Projection, tile_grid, with_depth_channel
 
+TOO_MANY_PAIRS = "too many Gaussian/tile pairs for one render"
+"""How both kernels (csrc/raster_cpu.cpp, numba_kernel.py) say a render passed their 2^31 splat/tile pairs."""
 log = logging.getLogger(__name__)
 _lock = threading.Lock()
 _state: dict[str, object] = {}
@@ -56,7 +59,16 @@ def bin_entries(proj: Projection, n_cams: int, width: int, height: int, kernel: 
     kernel = kernel or load_kernel()
     tiles_x, tiles_y = tile_grid(width, height)
     order = depth_order(proj.depths.detach(), kernel)
-    offsets, pairs = kernel.bin_tiles(proj.tile_bbox, proj.cam_ids.to(torch.int32), order, n_cams, tiles_x, tiles_y)
+    try:
+        offsets, pairs = kernel.bin_tiles(proj.tile_bbox, proj.cam_ids.to(torch.int32), order, n_cams, tiles_x, tiles_y)
+    except (RuntimeError, ValueError) as exc:
+        if TOO_MANY_PAIRS not in str(exc):
+            raise
+        size = f"{n_cams} view{'s' if n_cams > 1 else ''} of {width}x{height} px"
+        raise GT2GSError(
+            f"the render is too large for the rasterizer ({size}: over 2^31 splat/tile pairs); render smaller or "
+            "fewer views at once"
+        ) from None
     return TileBins(offsets=offsets, pair_gauss=pairs)
 
 
