@@ -32,7 +32,7 @@ from gt2gs_blender.core import atomic
 from gt2gs_blender.core.cameras.camera import MAX_IMAGE_SIDE, Camera
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
 from gt2gs_blender.core.cameras.files import load_views
-from gt2gs_blender.core.errors import CameraFileError, InputFileError, PlyFormatError
+from gt2gs_blender.core.errors import CameraFileError, GT2GSError, InputFileError, PlyFormatError
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.files import write_splats
 from gt2gs_blender.core.scene.gaussians import GaussianScene
@@ -458,6 +458,19 @@ def test_a_texture_strip_too_long_to_turn_is_one_line_naming_it(tmp_path, capsys
     write_splats(scene, torus_scene(n_major=8, n_minor=4))
     assert cli.main(["transfer", str(scene), str(path), "-o", str(tmp_path / "out.ply"), "--preset", "preview"]) == 2
     assert capsys.readouterr().err.strip() == f"gt2gs: error: {info.value}"
+
+
+def test_the_api_refuses_a_scene_with_nan_splats_and_zero_views_before_any_work():
+    """A scene built in Python can hold NaN (the readers refuse such files); it once surfaced as "radius must be
+    positive, got nan". Zero automatic views ran eight, where the command line refuses --views 0."""
+    scene = torus_scene(n_major=8, n_minor=4)
+    means = scene.means.detach().clone()
+    means[5] = float("nan")
+    config = TransferConfig(stylise_steps=1, correct_steps=0, rounds=1, resolution=32, n_views=2, backend="torch")
+    with pytest.raises(GT2GSError, match="the scene has 1 of 32 Gaussians with NaN or Inf values"):
+        transfer(replace(scene, means=means), np.full((16, 16, 3), 0.5), None, config)
+    with pytest.raises(GT2GSError, match="views: at least 1 automatic view, got 0"):
+        transfer(scene, np.full((16, 16, 3), 0.5), 0, config)
 
 
 def test_a_texture_array_is_held_to_a_texture_files_rules():

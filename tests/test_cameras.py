@@ -33,6 +33,7 @@ from gt2gs_blender.core.cameras.generate import (
 )
 from gt2gs_blender.core.cameras.llff import LLFFData, load_llff
 from gt2gs_blender.core.errors import CameraFileError
+from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
@@ -858,6 +859,19 @@ def test_auto_views_validation() -> None:
         auto_views(scene, 4, up="sideways")
     cams = auto_views(scene, 4, width=64, height=32, margin=1.0)
     assert all((c.width, c.height) == (64, 32) for c in cams)
+
+
+@pytest.mark.parametrize("count", [1, 50])
+def test_auto_views_frame_one_splat_or_splats_at_one_point(count: int) -> None:
+    """A box of no size once put the cameras inside the splat (white views, "behind the cameras"): the views now
+    frame a typical splat's own footprint, from outside it."""
+    scene = GaussianScene.from_activated(
+        torch.full((count, 3), 2.0), torch.full((count, 3), 0.05), torch.full((count,), 0.9), torch.rand(count, 3)
+    )
+    cameras = auto_views(scene, 4, width=64, height=64)
+    out = render(scene, cameras, backend="torch")
+    assert all(0.02 < float(alpha.mean()) < 0.5 for alpha in out.alphas)
+    assert all(np.linalg.norm(c.center - 2.0) > 3 * 0.05 for c in cameras)
 
 
 def test_camera_path_through_an_orbit_turns_like_a_denser_orbit() -> None:

@@ -304,7 +304,7 @@ def auto_views(
         raise ValueError(f"kind must be 'auto', 'orbit' or 'arc', got {kind!r}")
     if margin <= 0:
         raise ValueError(f"margin must be positive, got {margin}")
-    lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
+    lo, hi = _framed_box(scene, quantile)
     center = (lo + hi) / 2.0
     sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
     if up == "auto":
@@ -323,6 +323,22 @@ def auto_views(
     corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
     return views(_fitting_radius(views, corners, sphere_radius, enclosing) * margin)
+
+
+FRAMED_SIGMAS = 3.0
+"""A box the views frame reaches at least this many of a typical splat's largest sigma from its middle."""
+
+
+def _framed_box(scene: GaussianScene, quantile: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box the views frame: the splats' robust bounds, or where those are smaller than a typical splat's own
+    footprint (``FRAMED_SIGMAS`` x the median largest sigma) on every axis, a cube that reaches that far: one splat,
+    or splats at one point, are framed instead of looked at from inside (a flat scene keeps its flat box)."""
+    lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
+    reach = FRAMED_SIGMAS * float(scene.scales.detach().max(dim=1).values.median())
+    if float((hi - lo).max()) / 2.0 >= reach:
+        return lo, hi
+    middle = (lo + hi) / 2.0
+    return middle - reach, middle + reach
 
 
 CUT_SHARE = 0.999

@@ -151,6 +151,13 @@ class GaussianScene:
         lohi = torch.quantile(self.means.float(), q.float(), dim=0).to(self.means.dtype)
         return lohi[0], lohi[1]
 
+    def finite_rows(self) -> torch.Tensor:
+        """(N,) bool: the Gaussians all of whose parameters are finite (no NaN or Inf)."""
+        rows = torch.ones(len(self), dtype=torch.bool, device=self.device)
+        for tensor in self.tensors().values():
+            rows &= torch.isfinite(tensor.detach()).reshape(len(self), -1).all(dim=1)
+        return rows
+
     # -- structure ----------------------------------------------------------------------------------
     def tensors(self) -> dict[str, torch.Tensor]:
         """The trainable parameter tensors by name."""

@@ -23,6 +23,7 @@ from ..cameras.axes import axis_name
 from ..cameras.camera import Camera
 from ..cameras.generate import scene_up
 from ..device import resolve_device
+from ..errors import GT2GSError
 from ..scene.gaussians import GaussianScene
 from .bank import bank_depth_ratio
 from .config import TransferConfig
@@ -96,6 +97,7 @@ def plan_run(
     views only when the layout or ``texture_repeats`` needs them (the sketch preview takes a fraction of a
     second), and leaves the depth ratio as asked then."""
     device = resolve_device(config.device)
+    require_finite_scene(scene)
     image = run_texture(texture, config)
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
@@ -135,6 +137,17 @@ def plan_run(
         start=start,
         frame=frame,
     )
+
+
+def require_finite_scene(scene: GaussianScene) -> None:
+    """Refuse a scene with NaN or Inf splats before any work (a reader refuses such a file unless asked to drop
+    them; a scene built in Python can still hold them), saying how to leave them out."""
+    bad = len(scene) - int(scene.finite_rows().sum())
+    if bad:
+        raise GT2GSError(
+            f"the scene has {bad} of {len(scene)} Gaussians with NaN or Inf values; leave them out "
+            "(scene.subset(scene.finite_rows()), or read the file with drop_invalid=True)"
+        )
 
 
 def run_texture(texture: np.ndarray | str | os.PathLike, config: TransferConfig) -> np.ndarray:

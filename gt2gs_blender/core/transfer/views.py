@@ -67,8 +67,10 @@ def fit_cameras(
     """Automatic views (a count or None) around the ``up`` axis, framed in ``resolution`` squares (``cut``: and cut
     to the splats, so a tall or wide object is not rendered with empty bands), or the given cameras resized so their
     longest side is ``resolution``."""
+    if isinstance(views, int) and views < 1:
+        raise GT2GSError(f"views: at least 1 automatic view, got {views}")
     if views is None or isinstance(views, int):
-        framed = auto_views(scene, views or n_default, width=resolution, height=resolution, up=up)
+        framed = auto_views(scene, n_default if views is None else views, width=resolution, height=resolution, up=up)
         return cut_to_scene(framed, scene) if cut else framed
     cameras = list(views)
     if not cameras:
