@@ -488,6 +488,23 @@ def test_transfer_command_bad_region_is_one_line_naming_the_file(capsys, small_p
     assert_one_line_error(err, f"{region}: ", words)
 
 
+def test_a_foreign_file_given_as_a_region_weights_or_capture_is_named_for_what_it_is_not(capsys, small_ply, tmp_path):
+    """numpy reads any non-.npy file as a pickle and says so, torch's errors for a text file say nothing about it, and
+    a missing capture folder was "no image folder": each is now one line saying what the file is not."""
+    text = tmp_path / "notes.txt"
+    text.write_text("hello")
+    transfer = ["transfer", str(small_ply), str(stripe_png(tmp_path)), "-o", str(tmp_path / "o.ply"), *DEMO_FAST]
+    code, _, err = run(capsys, *transfer, "--region", str(text))
+    assert code == 2
+    assert_one_line_error(err, f"{text}: ", "the region is not a .npy file (it starts with b'hello')")
+    code, _, err = run(capsys, *transfer, "--weights", str(text))  # found when the run loads its network
+    assert code == 2
+    assert_one_line_error(err.strip().splitlines()[-1], f"{text}: ", "is not a PyTorch weights file (.pth)")
+    code, _, err = run(capsys, "fit", str(tmp_path / "absent"), "--out", str(tmp_path / "fit"))
+    assert code == 2
+    assert_one_line_error(err, f"{tmp_path / 'absent'}: ", "no such folder")
+
+
 @pytest.mark.parametrize(
     "argv",
     [

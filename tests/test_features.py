@@ -207,7 +207,7 @@ def test_named_spec_not_found_is_an_error(isolated):
 def test_unusable_user_files_are_input_file_errors(shared, isolated, monkeypatch, tmp_path):
     corrupt = tmp_path / "corrupt.pth"
     corrupt.write_bytes(b"PK\x03\x04 not really a zip")
-    with pytest.raises(InputFileError, match="cannot read weights"):
+    with pytest.raises(InputFileError, match="cannot read it as PyTorch weights"):
         resolve_weights(weights_path=corrupt)
     with pytest.raises(InputFileError, match="not found"):
         resolve_weights(weights_path=tmp_path / "missing.pth")

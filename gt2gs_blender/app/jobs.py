@@ -41,6 +41,9 @@ def load_npy(path: Path, what: str) -> np.ndarray:
     """A user's .npy file as an array; an empty, truncated or malformed one (or a pickle, or a .npz) is one line
     naming it. The file is mapped before it is copied, so a header that declares more than the file holds is
     refused rather than allocated."""
+    head = _head(path)
+    if head and not head.startswith(NPY_MAGIC[: len(head)]):
+        raise InputFileError(path, f"{what} is not a .npy file (it starts with {head!r})")
     try:
         array = np.load(path, mmap_mode="r", allow_pickle=False)
     except EOFError:
@@ -51,6 +54,19 @@ def load_npy(path: Path, what: str) -> np.ndarray:
         array.close()
         raise InputFileError(path, f"{what} must be one .npy array, not a .npz archive of several")
     return np.array(array)
+
+
+NPY_MAGIC = b"\x93NUMPY"
+"""How every .npy file starts (numpy reads anything else as a pickle, and its error says so)."""
+
+
+def _head(path: Path) -> bytes:
+    """The first bytes of a file, enough for its magic (empty when it cannot be opened: the loader says why)."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(len(NPY_MAGIC))
+    except OSError:
+        return b""
 
 
 def load_region(path: Path, n: int) -> np.ndarray:

@@ -96,13 +96,27 @@ def load_state_dict(path: str | os.PathLike) -> dict[str, torch.Tensor]:
     Zip-format files are memory-mapped so that only the tensors used are read (the full VGG-16
     file is 528 MB, of which the features to relu3_3 are 7 MB).
     """
+    _require_torch_file(path)
     try:
         data = torch.load(path, map_location="cpu", weights_only=True, mmap=zipfile.is_zipfile(path))
     except Exception as exc:  # torch.load raises many types for truncated or foreign files
-        raise InputFileError(path, f"cannot read weights ({type(exc).__name__}: {exc})") from exc
+        first = (str(exc).strip().splitlines() or [""])[0].split(". ")[0]
+        raise InputFileError(path, f"cannot read it as PyTorch weights ({type(exc).__name__}: {first})") from exc
     if not isinstance(data, dict) or not all(isinstance(v, torch.Tensor) for v in data.values()):
         raise InputFileError(path, "is not a state dict of tensors")
     return data
+
+
+def _require_torch_file(path: str | os.PathLike) -> None:
+    """Refuse a file that is neither of torch.save's formats (a zip archive, or a pickle: protocol byte 0x80) before
+    torch reads it, whose errors for a foreign file say nothing about the file."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(4)
+    except OSError as exc:
+        raise InputFileError(path, f"cannot read the weights ({exc.strerror or exc})") from None
+    if not head.startswith((b"PK\x03\x04", b"\x80")):
+        raise InputFileError(path, f"is not a PyTorch weights file (.pth); it starts with {head!r}")
 
 
 def resolve_weights(

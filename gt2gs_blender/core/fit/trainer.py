@@ -270,6 +270,8 @@ def load_images(paths: Sequence[Path], width: int, height: int) -> torch.Tensor:
 def llff_image_folder(scene_dir: Path, downscale: int) -> str:
     """The stored image folder with the smallest resolution at least as large as ``downscale`` asks
     for (``images_8`` for 8, and for 16 when ``images_16`` is absent); images are resized on load."""
+    if not scene_dir.is_dir():
+        raise InputFileError(scene_dir, "no such folder" if not scene_dir.exists() else "is not a folder")
     for factor in (f for f in (32, 16, 8, 4, 2, 1) if f <= downscale):
         folder = "images" if factor == 1 else f"images_{factor}"
         if (scene_dir / folder).is_dir():

@@ -52,6 +52,7 @@ class TransferConfig(SpeedSettings):
         "views",
         unit="px",
         min=16,
+        max=8192,
         soft_max=1024,
     )
     dense_upscale: float = setting(
