@@ -22,6 +22,8 @@ import os
 import sys
 import time
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
 import bpy
 
@@ -69,7 +71,7 @@ def ensure_registered() -> None:
     gt2gs_blender.register()
 
 
-def extension_module(name: str):
+def extension_module(name: str) -> ModuleType:
     """A module of the registered extension (the installed ``bl_ext...`` copy or this source tree)."""
     package = bpy.types.GT2GS_OT_transfer_texture.__module__.rsplit(".operators", 1)[0]
     return importlib.import_module(f"{package}.{name}")
@@ -133,14 +135,15 @@ def main(argv: list[str] | None = None) -> int:
 class WithoutErrorEcho:
     """A stdout without Blender's echo of an operator's error (``Error: ...``), which the error line says once."""
 
-    def __init__(self, stream) -> None:
+    def __init__(self, stream: Any) -> None:
         self.stream = stream
 
     def write(self, text: str) -> int:
         """Pass ``text`` on unless it is an error report (Blender writes each report in one call)."""
         return len(text) if text.startswith("Error: ") else self.stream.write(text)
 
-    def __getattr__(self, name: str):
+    def __getattr__(self, name: str) -> Any:
+        """Everything else (flush, encoding, ...) is the wrapped stream's."""
         return getattr(self.stream, name)
 
 
@@ -183,7 +186,7 @@ def run_manifest(args: argparse.Namespace) -> int:
     return 1 if failed else 0
 
 
-def run_job(job, files, key: str, args: argparse.Namespace) -> dict:
+def run_job(job: Any, files: Any, key: str, args: argparse.Namespace) -> dict:
     """One manifest job in this Blender: its settings on the scene's panel (the preset's, then the job's), import,
     transfer, export and the report into the job's folder, all or nothing; the report. The objects it made are
     removed after."""
@@ -226,7 +229,7 @@ def check_weights(report: dict, args: argparse.Namespace) -> None:
         )
 
 
-def transfer_object(job) -> tuple:
+def transfer_object(job: Any) -> tuple[bpy.types.Object, dict]:
     """Import the job's scene and re-texture it with the panel's settings: (result object, report)."""
     bpy.ops.gt2gs.import_ply(filepath=str(job.scene))
     source = bpy.context.view_layer.objects.active
@@ -239,7 +242,7 @@ def transfer_object(job) -> tuple:
     return result, dict(outcome.report) if outcome is not None and outcome.report else {}
 
 
-def set_setting(settings, name: str, value) -> None:
+def set_setting(settings: bpy.types.PropertyGroup, name: str, value: Any) -> None:
     """A job's setting on the scene's panel (angles in radians, as Blender keeps them); a machine setting, which
     Blender keeps in the add-on's preferences, is refused (set it there)."""
     config, setting = extension_module("core.transfer.config"), extension_module("core.transfer.setting")

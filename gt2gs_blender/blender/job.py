@@ -67,6 +67,7 @@ class JobStatus:
 
     @property
     def finished(self) -> bool:
+        """Whether the job has ended, well or not (done, cancelled or failed)."""
         return self.state in FINISHED_STATES
 
 
@@ -107,6 +108,7 @@ class Job:
         return self.folder / name
 
     def command(self) -> list[str]:
+        """The worker's command line: its Python running the worker module on this job's ``job.json``."""
         return [self.python, "-m", WORKER_MODULE, str(self.path("job.json"))]
 
     def start(self, spec: JobSpec) -> None:
@@ -212,6 +214,7 @@ class Job:
             status.message = status.error
 
     def stderr_tail(self) -> list[str]:
+        """The worker's last lines on stderr, for an error that says why it stopped."""
         return list(self._stderr)
 
     def cancel(self, grace_s: float = CANCEL_GRACE_S) -> JobStatus:

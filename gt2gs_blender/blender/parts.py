@@ -9,6 +9,7 @@ The functions take the scene's parts list (``store``: ``items`` of part / splats
 
 from __future__ import annotations
 
+import bpy
 import numpy as np
 
 from ..core.scene.parts import find_parts_in
@@ -19,7 +20,7 @@ LABEL_ATTRIBUTE = ".gt2gs_part"
 """Each point's part (INT, POINT domain); the leading dot keeps it out of exported files."""
 
 
-def find(obj, store) -> int:
+def find(obj: bpy.types.Object, store: bpy.types.PropertyGroup) -> int:
     """Find ``obj``'s parts, label its points and list the parts in ``store``; the number of parts."""
     scene, _ = splats.object_to_scene(obj)
     parts = find_parts_in(scene)
@@ -36,7 +37,7 @@ def find(obj, store) -> int:
     return len(parts)
 
 
-def stale_text(store, obj) -> str | None:
+def stale_text(store: bpy.types.PropertyGroup, obj: bpy.types.Object) -> str | None:
     """Why the listed parts are not those of ``obj`` (the run's object) any more, or None when they are (or none
     are listed)."""
     if not store.items:
@@ -51,7 +52,7 @@ def stale_text(store, obj) -> str | None:
     return None
 
 
-def select(obj, store, part: int, extend: bool = False) -> list[int]:
+def select(obj: bpy.types.Object, store: bpy.types.PropertyGroup, part: int, extend: bool = False) -> list[int]:
     """Select exactly the points of ``part`` of ``obj`` (Edit Mode's selection), or add them to it (``extend``);
     the parts now selected whole. RunError when the listed parts are stale or there is no such part."""
     labels = _labels(obj, store)
@@ -65,7 +66,7 @@ def select(obj, store, part: int, extend: bool = False) -> list[int]:
     return [p for p in range(len(store.items)) if chosen[labels == p].all() and (labels == p).any()]
 
 
-def grow(obj, store) -> list[int]:
+def grow(obj: bpy.types.Object, store: bpy.types.PropertyGroup) -> list[int]:
     """Grow the points selected in Edit Mode to the whole parts they belong to (a click on a splat picks its part);
     the parts now selected. RunError when the listed parts are stale or no point is selected."""
     labels = _labels(obj, store)
@@ -74,7 +75,7 @@ def grow(obj, store) -> list[int]:
     return [int(p) for p in chosen]
 
 
-def _labels(obj, store) -> np.ndarray:
+def _labels(obj: bpy.types.Object, store: bpy.types.PropertyGroup) -> np.ndarray:
     """(N,) each point's part; RunError when there are no parts or they are stale."""
     problem = stale_text(store, obj) if store.items else "No parts yet: Find Parts first"
     if problem:
@@ -84,7 +85,7 @@ def _labels(obj, store) -> np.ndarray:
     return labels
 
 
-def _set_selection(obj, chosen: np.ndarray) -> None:
+def _set_selection(obj: bpy.types.Object, chosen: np.ndarray) -> None:
     """Make ``chosen`` (N,) bool Edit Mode's point selection."""
     attributes = obj.data.attributes
     selection = attributes.get(SELECTION_ATTRIBUTE)

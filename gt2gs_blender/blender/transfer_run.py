@@ -92,14 +92,14 @@ NO_TARGET = "Select a Gaussian splat object"
 """What the panels and the greyed-out operators say when there is no splat object to act on."""
 
 
-def target_object(context):
+def target_object(context: bpy.types.Context) -> bpy.types.Object | None:
     """The splat object a run acts on: the panel's target, else the active object (None if not a splat)."""
     settings = context.scene.gt2gs
     obj = settings.target or context.active_object
     return obj if splats.is_splat_object(obj) else None
 
 
-def polled_target(cls, context):
+def polled_target(cls: type[bpy.types.Operator], context: bpy.types.Context) -> bpy.types.Object | None:
     """:func:`target_object` for an operator's poll, which says why it is greyed out when there is none."""
     obj = target_object(context)
     if obj is None:
@@ -107,7 +107,7 @@ def polled_target(cls, context):
     return obj
 
 
-def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+def config_overrides(context: bpy.types.Context, overrides: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     """(preset, TransferConfig settings): the panel's settings (none when a script names a preset: then the
     preset's), the preferences' machine settings, and the operator's keywords."""
     settings = context.scene.gt2gs
@@ -120,7 +120,7 @@ def config_overrides(context, overrides: dict[str, Any]) -> tuple[str, dict[str,
     return overrides.get("preset") or settings.preset, {k: v for k, v in config.items() if v is not None}
 
 
-def with_object_up(config: dict[str, Any], obj) -> dict[str, Any]:
+def with_object_up(config: dict[str, Any], obj: bpy.types.Object) -> dict[str, Any]:
     """``config`` with Up Axis Auto resolved from ``obj``'s own transform when the artist turned it to stand on
     an axis (:func:`up_from_rotation`); left to the splats otherwise."""
     if config.get("up", "auto") != "auto":
@@ -129,7 +129,7 @@ def with_object_up(config: dict[str, Any], obj) -> dict[str, Any]:
     return config if up is None else {**config, "up": up}
 
 
-def machine_settings(context) -> dict[str, Any]:
+def machine_settings(context: bpy.types.Context) -> dict[str, Any]:
     """The preferences' settings that decide what the machine check finds (none set: the engine's defaults)."""
     prefs = addon.preferences(context)
     if prefs is None:
@@ -138,7 +138,7 @@ def machine_settings(context) -> dict[str, Any]:
     return {name: values[name] for name in machine.MACHINE_SETTINGS if values.get(name) is not None}
 
 
-def gpu_preset_check(context, preset: str) -> None:
+def gpu_preset_check(context: bpy.types.Context, preset: str) -> None:
     """RunError when ``preset`` needs a CUDA GPU this machine lacks (asks the machine first if not known yet)."""
     settings = machine_settings(context)
     device = settings.get("device", "auto")
@@ -149,7 +149,7 @@ def gpu_preset_check(context, preset: str) -> None:
         raise RunError(problem)
 
 
-def first_view_label(context) -> str:
+def first_view_label(context: bpy.types.Context) -> str:
     """Which view is the first one, the view the texture's angle is measured in."""
     settings = context.scene.gt2gs
     if settings.view_source == "AUTO":
@@ -162,7 +162,7 @@ def first_view_label(context) -> str:
     return f"camera {names[0]!r} (first by name)" if names else "no camera yet"
 
 
-def views_label(settings) -> str | None:
+def views_label(settings: bpy.types.PropertyGroup) -> str | None:
     """What messages call the views when they come from the Blender scene (None: automatic views or a
     cameras.json the user picked, which messages name by its path)."""
     if settings.view_source == "SCENE_CAMERAS":
@@ -172,7 +172,9 @@ def views_label(settings) -> str | None:
     return None
 
 
-def view_spec(context, obj, job: Job, overrides: dict[str, Any]) -> str | int | None:
+def view_spec(
+    context: bpy.types.Context, obj: bpy.types.Object, job: Job, overrides: dict[str, Any]
+) -> str | int | None:
     """The job's ``views``: a count of automatic views (or None: the preset's) or a cameras.json path."""
     settings = context.scene.gt2gs
     if "n_views" in overrides:
@@ -199,7 +201,7 @@ def view_spec(context, obj, job: Job, overrides: dict[str, Any]) -> str | int | 
     return "cameras.json"
 
 
-def texture_missing(settings) -> str | None:
+def texture_missing(settings: bpy.types.PropertyGroup) -> str | None:
     """Why a transfer has no texture yet (the panel disables Transfer with it), None once one is chosen."""
     if settings.texture_source == "FILE" and not settings.texture_path:
         return "choose a texture file (or an image) first"
@@ -208,7 +210,7 @@ def texture_missing(settings) -> str | None:
     return None
 
 
-def texture_spec(context, job: Job, override: str | None) -> str:
+def texture_spec(context: bpy.types.Context, job: Job, override: str | None) -> str:
     """The job's texture: a file on disk, or an image datablock's pixels saved as .npy in the job folder."""
     settings = context.scene.gt2gs
     missing = None if override else texture_missing(settings)
@@ -241,7 +243,7 @@ def texture_spec(context, job: Job, override: str | None) -> str:
     return "texture.npy"
 
 
-def selection_mask(obj) -> np.ndarray | None:
+def selection_mask(obj: bpy.types.Object) -> np.ndarray | None:
     """(N,) bool: the points selected in Edit Mode, or None when the object has no point selection."""
     attribute = obj.data.attributes.get(SELECTION_ATTRIBUTE)
     if attribute is None or attribute.domain != "POINT":
@@ -251,7 +253,7 @@ def selection_mask(obj) -> np.ndarray | None:
     return values > 0
 
 
-def selected_points(obj) -> np.ndarray:
+def selected_points(obj: bpy.types.Object) -> np.ndarray:
     """Indices of the points selected in Edit Mode; RunError when none are."""
     mask = selection_mask(obj)
     if mask is None:
@@ -348,7 +350,9 @@ class TransferRun:
     started: float = field(default_factory=time.monotonic)
 
     @classmethod
-    def start(cls, context, overrides: dict[str, Any] | None = None, kind: str = "transfer") -> TransferRun:
+    def start(
+        cls, context: bpy.types.Context, overrides: dict[str, Any] | None = None, kind: str = "transfer"
+    ) -> TransferRun:
         """Export the target and start the worker; RunError (nothing started, nothing left) when it cannot."""
         overrides = overrides or {}
         if kind == "transfer" and kind in ACTIVE:
@@ -396,7 +400,7 @@ class TransferRun:
         ACTIVE[kind] = run
         return run
 
-    def tick(self, context) -> JobStatus:
+    def tick(self, context: bpy.types.Context) -> JobStatus:
         """Poll the worker, show a new preview frame, apply the result once it is done."""
         status = self.job.poll()
         if status.preview and status.preview != self.shown_preview and os.path.isfile(status.preview):
@@ -413,6 +417,7 @@ class TransferRun:
         return status
 
     def cancel(self) -> JobStatus:
+        """Ask the worker to stop; the scene is left as it was."""
         return self.job.cancel()
 
     def finish(self) -> Outcome:
@@ -435,7 +440,7 @@ class TransferRun:
         return outcome
 
 
-def apply_result(context, object_name: str, path: str, mode: str):
+def apply_result(context: bpy.types.Context, object_name: str, path: str, mode: str) -> bpy.types.Object:
     """Add the result PLY as a new splat object beside the source, or in place, remembering the source's file."""
     from ..core.scene.ply import read_ply_arrays
 

@@ -14,6 +14,7 @@ from ...core.transfer.setting import UpAxis
 
 
 def positive_int(text: str) -> int:
+    """An argparse type: an integer above 0."""
     try:
         value = int(text)
     except ValueError:
@@ -24,6 +25,7 @@ def positive_int(text: str) -> int:
 
 
 def positive_float(text: str) -> float:
+    """An argparse type: a finite number above 0."""
     try:
         value = float(text)
     except ValueError:
@@ -34,6 +36,7 @@ def positive_float(text: str) -> float:
 
 
 def floats(text: str, count: int, what: str) -> tuple[float, ...]:
+    """``count`` comma-separated finite numbers (``what`` says which, in the error)."""
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
@@ -70,6 +73,7 @@ def scene_input(path: Path | None) -> list[Named]:
 
 
 def scene_options() -> argparse.ArgumentParser:
+    """The options of every command that reads a scene (a parent parser): --drop-invalid."""
     parent = argparse.ArgumentParser(add_help=False)
     parent.add_argument(
         "--drop-invalid", action="store_true", help="load files with NaN/Inf Gaussians by dropping those Gaussians"
