@@ -337,11 +337,13 @@ def release_previews() -> None:
 
 @dataclass
 class TransferRun:
-    """One worker job started from Blender and what to do with its result."""
+    """One worker job started from Blender and what to do with its result: the object it restyles is known by its
+    ``session_uid`` (kept across renames), its name only for messages."""
 
     job: Job
     kind: str
     object_name: str
+    object_uid: int
     result_mode: str = "NEW"
     first_view: str = ""
     shown_preview: str | None = None
@@ -396,7 +398,7 @@ class TransferRun:
             if isinstance(exc, (splats.SplatObjectError, OSError, ValueError)):
                 raise RunError(str(exc)) from None
             raise
-        run = cls(job, kind, obj.name, settings.result_mode, first_view_label(context))
+        run = cls(job, kind, obj.name, obj.session_uid, settings.result_mode, first_view_label(context))
         ACTIVE[kind] = run
         return run
 
@@ -411,10 +413,18 @@ class TransferRun:
             self.shown_preview = status.output
         if status.state == DONE and self.kind == "transfer" and self.result_name is None:
             try:
-                self.result_name = apply_result(context, self.object_name, status.output, self.result_mode).name
-            except (splats.SplatObjectError, RunError, OSError, ValueError) as exc:
+                source = self.source_object()
+                if source is None:
+                    raise RunError(f"the object {self.object_name!r} was deleted")
+                self.result_name = apply_result(context, source, status.output, self.result_mode).name
+            except Exception as exc:  # whatever stops it (an operator's poll too), the run ends and says why
                 status.state, status.error = ERROR, f"the result could not be applied: {exc}"
         return status
+
+    def source_object(self) -> bpy.types.Object | None:
+        """The object the run restyles, whatever it is called now (None: deleted, or no longer splats)."""
+        found = next((o for o in bpy.data.objects if o.session_uid == self.object_uid), None)
+        return found if found is not None and splats.is_splat_object(found) else None
 
     def cancel(self) -> JobStatus:
         """Ask the worker to stop; the scene is left as it was."""
@@ -433,20 +443,24 @@ class TransferRun:
             outcome = Outcome(ERROR, status.error or "the transfer failed", seconds=seconds)
         outcome.mode = self.result_mode
         if status.state == DONE and self.result_mode == "NEW" and self.result_name:
-            outcome.message += f"; the original {self.object_name!r} is hidden (Alt+H shows it)"
+            source = self.source_object()
+            name = source.name if source is not None else self.object_name
+            outcome.message += f"; the original {name!r} is hidden (Alt+H shows it)"
         if ACTIVE.get(self.kind) is self:
             del ACTIVE[self.kind]
         OUTCOMES[self.kind] = outcome
         return outcome
 
 
-def apply_result(context: bpy.types.Context, object_name: str, path: str, mode: str) -> bpy.types.Object:
-    """Add the result PLY as a new splat object beside the source, or in place, remembering the source's file."""
+def apply_result(context: bpy.types.Context, source: bpy.types.Object, path: str, mode: str) -> bpy.types.Object:
+    """Add the result PLY as a new splat object beside ``source``, or in place, remembering the source's file. In
+    Edit Mode (Select Part's) the source goes back to Object Mode first, keeping its selection: the new object is made
+    by operators that need it."""
     from ..core.scene.ply import read_ply_arrays
 
-    source = bpy.data.objects.get(object_name)
-    if source is None or not splats.is_splat_object(source):
-        raise RunError(f"the object {object_name!r} is gone; the result was not applied")
+    if source.mode != "OBJECT":
+        with context.temp_override(active_object=source, object=source):
+            bpy.ops.object.mode_set(mode="OBJECT")
     collection = source.users_collection[0] if source.users_collection else context.scene.collection
     arrays = read_ply_arrays(path)
     made = splats.scene_to_object(

@@ -76,7 +76,7 @@ def test_a_transfer_result_is_not_exported_onto_the_file_its_original_was_import
     shutil.copyfile(donut, original)
     kept = original.read_bytes()
     source = imported(str(original))
-    result = transfer_run.apply_result(bpy.context, source.name, str(folder / "scene.ply"), mode)  # the worker's
+    result = transfer_run.apply_result(bpy.context, source, str(folder / "scene.ply"), mode)  # the worker's
     assert bpy.context.active_object == result
     with pytest.raises(RuntimeError, match=r"is your imported original.*Overwrite Imported File") as caught:
         bpy.ops.gt2gs.export_ply(filepath=str(original))

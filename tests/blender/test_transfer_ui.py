@@ -158,6 +158,36 @@ def test_modal_cycle_streams_progress_and_preview_then_applies(blob):
     assert run.finish().state == DONE and not run.job.folder.exists() and not transfer_run.ACTIVE
 
 
+def test_a_result_lands_on_its_own_original_whatever_it_and_others_are_called_now(blob, inputs):
+    """The artist renames the original while it is restyled and brings in another scan under its old name: In Place
+    writes onto the original (it once wrote onto the newcomer, and a rename alone threw the result away)."""
+    bpy.context.scene.gt2gs.result_mode = "IN_PLACE"
+    original = dc(blob)
+    run = transfer_run.TransferRun.start(bpy.context, {})
+    tick_until(run, lambda s: s.stage is not None)
+    blob.name = "blob_hero"
+    assert bpy.ops.gt2gs.import_ply(filepath=str(inputs["ply"])) == {"FINISHED"}
+    newcomer = bpy.context.active_object
+    newcomer.name = "blob"
+    kept = dc(newcomer)
+    assert tick_until(run, lambda s: s.finished).state == DONE
+    run.finish()
+    assert run.result_name == "blob_hero" and colours_differ(dc(bpy.data.objects["blob_hero"]), original)
+    assert np.array_equal(dc(bpy.data.objects["blob"]), kept)
+
+
+@pytest.mark.parametrize("mode", ["NEW", "IN_PLACE"])
+def test_a_transfer_started_in_edit_mode_applies_its_result(blob, mode):
+    """Select Part leaves the object in Edit Mode; the result is made by operators that need Object Mode, so the run
+    once ended in a traceback, left itself running for the rest of the session and its job folder behind."""
+    bpy.context.scene.gt2gs.result_mode = mode
+    assert bpy.ops.object.mode_set(mode="EDIT") == {"FINISHED"}
+    assert bpy.ops.gt2gs.transfer_texture() == {"FINISHED"}
+    outcome = transfer_run.OUTCOMES["transfer"]
+    assert outcome.state == DONE and not transfer_run.ACTIVE and not job_folders()
+    assert bpy.context.mode == "OBJECT" and splats.is_splat_object(bpy.data.objects[outcome.result])
+
+
 def test_cancel_mid_run_leaves_the_scene_and_no_files(blob):
     bpy.context.scene.gt2gs.stylise_steps = 400
     before = snapshot()
