@@ -324,7 +324,8 @@ def object_to_scene(obj, *, bake_transform: bool = False) -> tuple[SplatArrays, 
     """The object's Gaussians as core ``SplatArrays`` (numpy; no torch needed), and notes for the user.
 
     With ``bake_transform`` the object's world matrix is baked into the Gaussians (see ``transform``);
-    otherwise they stay in the object's local space, exactly as stored.
+    otherwise they stay in the object's local space, exactly as stored, and a note says so when the object was
+    moved, turned or scaled in Blender (the file would not show it where the scene does).
     """
     if not is_splat_object(obj):
         raise SplatObjectError(
@@ -348,6 +349,11 @@ def object_to_scene(obj, *, bake_transform: bool = False) -> tuple[SplatArrays, 
     if bake_transform:
         scene, baked_notes = _bake_world_matrix(obj, scene)
         notes.extend(baked_notes)
+    elif not transform.is_identity(np.array(obj.matrix_world, np.float64)):
+        notes.append(
+            f"{obj.name!r} is moved, turned or scaled in Blender, which the file does not keep: its splats are "
+            "written where the file had them (tick Apply Object Transform to bake the transform in)"
+        )
     return scene, notes
 
 

@@ -378,6 +378,8 @@ def test_export_bakes_translation_rotation_and_uniform_scale(fresh, tmp_path):
     plain = tmp_path / "plain.ply"
     assert bpy.ops.gt2gs.export_ply(filepath=str(plain)) == {"FINISHED"}
     assert filecmp.cmp(plain, src, shallow=False)  # not baking: the object's own space, untouched
+    assert any("tick Apply Object Transform" in note for note in splats.object_to_scene(obj)[1])  # and says so
+    assert not any("Apply Object Transform" in note for note in splats.object_to_scene(obj, bake_transform=True)[1])
 
     out = tmp_path / "baked.ply"
     assert bpy.ops.gt2gs.export_ply(filepath=str(out), bake_transform=True) == {"FINISHED"}
