@@ -23,6 +23,8 @@ from ..core.transfer.presets import DEFAULT_PRESET, PRESETS
 from ..core.transfer.setting import DEGREES, IN_SCENE, Setting
 
 DEFAULTS = PRESETS[DEFAULT_PRESET]
+FINE_STEP_RANGE = 0.3
+"""A float setting whose useful range ends by this steps by Blender's finest increment (0.01 a click)."""
 ANGLE_DECIMALS = 4
 """Angles come back from Blender's float32 radians to a ten-thousandth of a degree."""
 PATH_SETTINGS = {
@@ -102,8 +104,10 @@ def _property(name: str, meta: Setting, kind: type, update: Callable | None) -> 
 
 
 def _limits(name: str, meta: Setting, kind: type) -> dict[str, Any]:
-    """min / max / soft_max keywords of a number property, and for a float the decimals it shows: 2, or 3 where a
-    preset's value has a third (Blender shows more for a value smaller than that, such as 0.0005)."""
+    """min / max / soft_max keywords of a number property, and for a float the decimals it shows (2, or 3 where a
+    preset's value has a third; Blender shows more for a value smaller than that, such as 0.0005) and the step of
+    its arrows: Blender's finest (0.01) where the useful range ends by ``FINE_STEP_RANGE``, else its default (0.03,
+    which took Content Strength from 0.005 to 0.035 in one click)."""
     limits = {
         key: kind(value)
         for key, value in (("min", meta.min), ("max", meta.max), ("soft_max", meta.soft_max))
@@ -112,6 +116,9 @@ def _limits(name: str, meta: Setting, kind: type) -> dict[str, Any]:
     if kind is float:
         values = [getattr(preset, name) for preset in PRESETS.values()]
         limits["precision"] = 2 if all(round(v, 2) == v or abs(v) < 0.01 for v in values) else 3
+        top = meta.soft_max if meta.soft_max is not None else meta.max
+        if top is not None and top <= FINE_STEP_RANGE:
+            limits["step"] = 1
     return limits
 
 

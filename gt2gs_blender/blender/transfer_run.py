@@ -219,6 +219,8 @@ def texture_spec(context: bpy.types.Context, job: Job, override: str | None) -> 
     if override or settings.texture_source == "FILE":
         chosen = override or settings.texture_path
         path = os.path.abspath(bpy.path.abspath(chosen))
+        if os.path.isdir(path):
+            raise RunError(f"{path}: the texture is a folder; choose an image file in it")
         if not os.path.isfile(path):
             raise RunError(f"texture file not found: {path}")
         problem = textures.texture_problem(path)

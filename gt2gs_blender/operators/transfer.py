@@ -15,7 +15,7 @@ import bpy
 from bpy.props import FloatProperty, IntProperty, StringProperty
 
 from ..blender import transfer_run
-from ..blender.job import DONE, RUNNING
+from ..blender.job import DONE, ERROR, RUNNING
 from ..core.transfer.config import SETTINGS
 from ..core.transfer.presets import PRESETS, preset
 from . import machine
@@ -109,7 +109,8 @@ def _end(op, run: transfer_run.TransferRun) -> set[str]:
         machine.check()  # a first run builds the kernel (and may find weights): the preferences show it
     level = {"DONE": "INFO", "CANCELLED": "WARNING"}.get(outcome.state, "ERROR")
     what = "Texture transfer" if run.kind == "transfer" else "Orientation preview"
-    op.report({level}, f"{what} {outcome.message}" + (f": {outcome.result}" if outcome.result else ""))
+    message = f"failed: {outcome.message}" if outcome.state == ERROR else outcome.message
+    op.report({level}, f"{what} {message}" + (f": {outcome.result}" if outcome.result else ""))
     return {"FINISHED"} if outcome.state == DONE else {"CANCELLED"}
 
 

@@ -7,10 +7,12 @@ come from, the preset menu, the live orientation preview and where the result go
 
 from __future__ import annotations
 
+import contextlib
+
 import bpy
 from bpy.props import BoolProperty, EnumProperty, PointerProperty, StringProperty
 
-from ..blender import properties, splats
+from ..blender import properties, splats, transfer_run
 from ..core.transfer.presets import DEFAULT_PRESET, GPU_PRESETS, PRESET_HELP, PRESETS
 from ..core.transfer.setting import IN_SCENE
 
@@ -51,9 +53,16 @@ PREVIEWED = (
 
 
 def _layout_changed(self, context) -> None:
-    """Re-render the orientation preview when what it shows changes (PREVIEWED), if the user asked for it."""
-    if self.auto_preview and not _applying_preset and bpy.ops.gt2gs.preview_orientation.poll():
-        bpy.ops.gt2gs.preview_orientation("INVOKE_DEFAULT")
+    """Re-render the orientation preview when what it shows changes (PREVIEWED), if the user asked for it and there
+    is a texture to show (the panel already says when there is none; a preview would only raise it again)."""
+    if (
+        self.auto_preview
+        and not _applying_preset
+        and transfer_run.texture_missing(self) is None
+        and bpy.ops.gt2gs.preview_orientation.poll()
+    ):
+        with contextlib.suppress(RuntimeError):  # the operator has reported why it could not start (Info editor)
+            bpy.ops.gt2gs.preview_orientation("INVOKE_DEFAULT")
 
 
 def _preset_chosen(self, context) -> None:

@@ -188,6 +188,17 @@ def test_a_transfer_started_in_edit_mode_applies_its_result(blob, mode):
     assert bpy.context.mode == "OBJECT" and splats.is_splat_object(bpy.data.objects[outcome.result])
 
 
+def test_live_preview_without_a_texture_waits_quietly(blob, capfd):
+    """Live Orientation Preview on and no texture yet: dragging the angle printed a traceback at every step."""
+    settings = bpy.context.scene.gt2gs
+    settings.texture_path = ""
+    settings.auto_preview = True
+    for degrees in (10.0, 20.0, 30.0):
+        settings.angle = math.radians(degrees)
+    out, err = capfd.readouterr()
+    assert "Traceback" not in out + err and not transfer_run.ACTIVE
+
+
 def test_cancel_mid_run_leaves_the_scene_and_no_files(blob):
     bpy.context.scene.gt2gs.stylise_steps = 400
     before = snapshot()
@@ -715,6 +726,20 @@ def test_undecodable_texture_is_refused_before_the_worker_starts(blob, tmp_path)
     assert texture_problem(str(bpy.context.scene.gt2gs.texture_path)) is None
 
 
+def test_a_texture_refused_only_by_the_worker_or_a_folder_reads_as_a_failed_transfer(blob, tmp_path):
+    """Blender decodes a truncated JPEG, the worker does not: the report says the transfer failed (it read "Texture
+    transfer /path: ..."); a folder given as the texture says so (it read "texture file not found")."""
+    before = snapshot()
+    photo = Path(TEXTURES[0]).read_bytes() if TEXTURES else pytest.skip("needs the shared texture photos")
+    cut = tmp_path / "cut.jpg"
+    cut.write_bytes(photo[: len(photo) // 2])
+    with pytest.raises(RuntimeError, match=f"Texture transfer failed: {cut}: "):
+        bpy.ops.gt2gs.transfer_texture(texture_path=str(cut))
+    with pytest.raises(RuntimeError, match=f"{tmp_path}: the texture is a folder; choose an image file in it"):
+        bpy.ops.gt2gs.transfer_texture(texture_path=str(tmp_path))
+    assert same(snapshot(), before) and not transfer_run.ACTIVE
+
+
 def test_gpu_only_presets_are_marked_and_refused_without_cuda(blob, monkeypatch):
     from gt2gs_blender.core.transfer.presets import GPU_PRESETS
     from gt2gs_blender.panels.settings import PRESET_ITEMS
@@ -886,6 +911,8 @@ def test_every_choice_and_number_reads_well(fresh):
             assert all(item.description for item in prop.enum_items), prop.identifier
         if prop.type == "FLOAT":
             assert prop.precision in (2, 3), (prop.identifier, prop.precision)
+            if prop.subtype != "ANGLE":  # one arrow click stays within the useful range's tenth (0.01 the finest)
+                assert prop.step / 100 <= max(prop.soft_max / 10, 0.01), (prop.identifier, prop.step, prop.soft_max)
 
 
 def test_up_axis_auto_follows_an_object_the_artist_stood_upright(blob):
