@@ -72,10 +72,10 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--up",
         type=up,
-        default=(0.0, 0.0, 1.0),
+        default="auto",
         metavar="auto|AXIS|X,Y,Z",
-        help="the scene's up axis for generated views: +z (the default, Blender's), -y (a 3DGS trainer's "
-        "capture: write --up=-y), any signed axis, auto (estimated from the splats) or a vector x,y,z",
+        help="the scene's up axis for generated views: auto (the default: estimated from the splats, as transfer "
+        "does), +z (Blender's), -y (a 3DGS trainer's capture: write --up=-y), any signed axis or a vector x,y,z",
     )
     p.add_argument("--depth", action="store_true", help="also write 16-bit depth PNGs (DIR/depth_000.png, ...)")
     p.set_defaults(run=cmd_render)
