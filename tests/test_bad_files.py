@@ -130,7 +130,7 @@ BAD_NPY = {
     "magic-only": (b"\x93NUMPY", "as a .npy array"),
     "header-only": (npy_header((10,), "<i8"), "as a .npy array"),
     "huge-shape": (npy_header((10**13,), "|b1") + bytes(16), "as a .npy array"),
-    "not-npy": (b"hello, world", "as a .npy array"),
+    "not-npy": (b"hello, world", "is not a .npy file (it starts with b'hello,')"),
     "pickle": (npy_header((1,), "|O") + b"\x80\x04N.", "as a .npy array"),
 }
 

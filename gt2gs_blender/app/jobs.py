@@ -42,7 +42,7 @@ def load_npy(path: Path, what: str) -> np.ndarray:
     naming it. The file is mapped before it is copied, so a header that declares more than the file holds is
     refused rather than allocated."""
     head = _head(path)
-    if head and not head.startswith(NPY_MAGIC[: len(head)]):
+    if head and not head.startswith((NPY_MAGIC[: len(head)], ZIP_MAGIC)):  # a .npz is a zip: named below
         raise InputFileError(path, f"{what} is not a .npy file (it starts with {head!r})")
     try:
         array = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -56,8 +56,8 @@ def load_npy(path: Path, what: str) -> np.ndarray:
     return np.array(array)
 
 
-NPY_MAGIC = b"\x93NUMPY"
-"""How every .npy file starts (numpy reads anything else as a pickle, and its error says so)."""
+NPY_MAGIC, ZIP_MAGIC = b"\x93NUMPY", b"PK\x03\x04"
+"""How every .npy file starts (numpy reads anything else as a pickle, and its error says so), and a .npz."""
 
 
 def _head(path: Path) -> bytes:
