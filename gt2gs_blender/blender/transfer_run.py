@@ -34,6 +34,8 @@ SELECTION_ATTRIBUTE = ".selection"
 """The point selection of a point cloud's Edit Mode."""
 PREVIEW_KEY = "preview"
 RESULT_SUFFIX = " GT²"
+RESULT_OF = "gt2gs_result_of"
+"""A new result object's property holding its original (a datablock reference: it follows renames)."""
 
 
 STAGE_NAMES = {
@@ -97,6 +99,25 @@ def target_object(context: bpy.types.Context) -> bpy.types.Object | None:
     settings = context.scene.gt2gs
     obj = settings.target or context.active_object
     return obj if splats.is_splat_object(obj) else None
+
+
+def original_of(obj: bpy.types.Object) -> bpy.types.Object | None:
+    """The splat object a New Object result was made from, if it is still in a collection (deleting an object the
+    property holds leaves it in the file, unlinked)."""
+    original = obj.get(RESULT_OF)
+    if not isinstance(original, bpy.types.Object) or not original.users_collection:
+        return None
+    return original if splats.is_splat_object(original) else None
+
+
+def result_target_hint(context: bpy.types.Context) -> str | None:
+    """What the panel says under an empty *Target* when the active object is a previous run's result (as it is after
+    a New Object run, so a second run would restyle the result): whose result it is, and how to start from it."""
+    obj = None if context.scene.gt2gs.target else target_object(context)
+    original = None if obj is None else original_of(obj)
+    if original is None:
+        return None
+    return f"Restyles {obj.name}, a result; set Target to {original.name} to start from the original"
 
 
 def polled_target(cls: type[bpy.types.Operator], context: bpy.types.Context) -> bpy.types.Object | None:
@@ -474,6 +495,7 @@ def apply_result(context: bpy.types.Context, source: bpy.types.Object, path: str
         with_material=bool(source.data.materials),
     )
     if mode == "NEW":
+        made[RESULT_OF] = source
         made.matrix_world = source.matrix_world.copy()
         for obj in context.view_layer.objects.selected:
             obj.select_set(False)

@@ -118,6 +118,9 @@ class VIEW3D_PT_gt2gs_transfer(bpy.types.Panel):
         settings = context.scene.gt2gs
         view = current_view(context)
         layout.prop(settings, "target")
+        hint = transfer_run.result_target_hint(context)
+        if hint:
+            text_lines(layout, hint, icon="INFO")
         layout.prop(settings, "preset")
         row = layout.row()
         row.use_property_split = False  # the two choices across the panel: "New Object" was cut in the split

@@ -130,6 +130,15 @@ def test_transfer_operator_headless_adds_a_new_object(blob, capfd):
     assert shown.message == ""  # the main panel's message says it once, with the hidden original
     assert blob.hide_get() and result.visible_get()  # the result takes the original's place on screen
     assert re.fullmatch(r"Done in \d+ s; the original 'blob' is hidden \(Alt\+H shows it\)", view.message)
+    # a second run would restyle the result (the active object): the panel says so and how to start from the original
+    blob.name = "hero"
+    hint = "Restyles blob GT², a result; set Target to hero to start from the original"
+    assert transfer_run.result_target_hint(bpy.context) == hint
+    bpy.context.scene.gt2gs.target = blob
+    assert transfer_run.result_target_hint(bpy.context) is None
+    bpy.context.scene.gt2gs.target = None
+    bpy.data.objects.remove(blob)  # the original deleted: nothing to point to
+    assert transfer_run.result_target_hint(bpy.context) is None
 
 
 def test_transfer_in_place_replaces_the_splats(blob):
