@@ -92,7 +92,7 @@ def run_batch(
         if report is not None:
             rows[job.name] = Row(job, "kept", report=report)
     todo = [(job, key) for job, key in zip(jobs, keys) if job.name not in rows]
-    interrupted = False
+    interrupted: KeyboardInterrupt | None = None
     try:
         with contextlib.ExitStack() as stack:
             board = stack.enter_context(Board(len(jobs), 1, stream))
@@ -108,8 +108,8 @@ def run_batch(
         _tidy(out, jobs)
     ordered = [rows.get(job.name) or Row(job, "cancelled") for job in jobs]
     files = [*write_summary(out, ordered), write_contact_sheet(out, ordered)]
-    if interrupted:
-        raise KeyboardInterrupt
+    if interrupted is not None:
+        raise interrupted  # Ctrl-C, or the signal that stopped the command (it exits as that signal says)
     return BatchResult(ordered, files)
 
 
@@ -229,8 +229,9 @@ def _remote_plan(client: Client, scheduler: str, threads: int | None, jobs: list
 
 def _run(
     client: Client, plan: Plan, out: Path, todo: list[tuple[Job, str]], retries: int, board: Board, rows: dict
-) -> bool:
-    """Submit the jobs, show their starts and ends, fill ``rows``; True when Ctrl-C cancelled the batch."""
+) -> KeyboardInterrupt | None:
+    """Submit the jobs, show their starts and ends, fill ``rows``; the interrupt (Ctrl-C, or a stop signal) that
+    cancelled the batch, None when it ran to its end."""
     batch = uuid.uuid4().hex
     events: queue.SimpleQueue = queue.SimpleQueue()
     client.subscribe_topic(TOPIC, events.put)
@@ -260,7 +261,7 @@ def _run(
                 rows[job.name] = _row(future, job, out, attempts.get(job.name, 1))
                 board.end(rows[job.name])
             time.sleep(POLL_S)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         board.say("interrupted: cancelling the batch (running jobs stop and write nothing; one saving finishes)")
         finished_now = [f for f in futures if f.status == "finished" and futures[f].name not in rows]
         _cancel(client, batch, [f for f in futures if f not in finished_now])
@@ -278,10 +279,10 @@ def _run(
                 seconds = float(report.get("seconds") or 0.0)
                 rows[job.name] = Row(job, "done", attempts.get(job.name, 1), seconds, report=report)
                 board.end(rows[job.name])
-        return True
+        return stop
     finally:
         client.unsubscribe_topic(TOPIC)
-    return False
+    return None
 
 
 def _take_events(
