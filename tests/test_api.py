@@ -11,6 +11,8 @@ ROOT = Path(__file__).resolve().parents[1]
 LIGHT = (
     "gt2gs_blender.core",
     "gt2gs_blender.core.errors",
+    "gt2gs_blender.core.raster_rules",
+    "gt2gs_blender.core.features.specs",
     "gt2gs_blender.core.progress",
     "gt2gs_blender.core.rotations",
     "gt2gs_blender.core.scene.inria",

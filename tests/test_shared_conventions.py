@@ -71,13 +71,15 @@ def test_inria_names_and_sh_layout():
     np.testing.assert_array_equal(inria.tensor_view("sh_rest", storage)[1, :, 0], [9, 10, 11])
 
 
-@pytest.mark.parametrize("literal", ["0.28209479177387814", "1 - 2 * (y * y + z * z)"])
+@pytest.mark.parametrize("literal", ["0.28209479177387814", "1 - 2 * (y * y + z * z)", "ALPHA_MIN = "])
 def test_conventions_are_written_once_in_the_package(literal):
     """SH_C0 lives in core/scene/inria.py; the quaternion formula in core/rotations.py only (numpy, torch and the
-    numba kernel all call it)."""
+    numba kernel all call it); the rasterizer's alpha rules in core/raster_rules.py (every backend and Blender's
+    display read them)."""
     homes = {
         "0.28209479177387814": {"core/scene/inria.py"},
         "1 - 2 * (y * y + z * z)": {"core/rotations.py"},
+        "ALPHA_MIN = ": {"core/raster_rules.py"},
     }[literal]
     found = {str(p.relative_to(PACKAGE)) for p in PACKAGE.rglob("*.py") if literal in p.read_text(encoding="utf-8")}
     assert found == homes

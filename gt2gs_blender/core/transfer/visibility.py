@@ -17,14 +17,12 @@ import torch
 from ..cameras.camera import Camera
 from ..device import resolve_device
 from ..errors import InputFileError
+from ..raster_rules import ALPHA_MIN
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from .config import TransferConfig
 from .region import region_mask
 from .views import fit_cameras
-
-MIN_ALPHA = 1.0 / 255.0
-"""3DGS's alpha rule: a Gaussian less opaque than this never adds to a pixel."""
 
 
 @torch.no_grad()
@@ -60,7 +58,7 @@ def require_visible(
     if visible_in_any(scene, cameras, config.backend):
         return
     where = f"the {len(cameras)} views of {views_source}" if views_source else f"the {len(cameras)} automatic views"
-    if not bool((scene.opacities >= MIN_ALPHA).any()):
+    if not bool((scene.opacities >= ALPHA_MIN).any()):  # fainter splats never add to a pixel
         why = f"all {n:,} Gaussians are fully transparent (opacity below 1/255); check the file's opacity values"
     else:
         why = f"all {n:,} Gaussians are behind the cameras or outside their images" + (
