@@ -8,6 +8,7 @@ they print or send afterwards.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import warnings
@@ -18,7 +19,7 @@ import cv2
 import numpy as np
 import torch
 
-from ..core.atomic import atomic_write
+from ..core.atomic import ZIP_MAGIC, atomic_write, read_head
 from ..core.cameras.camera import Camera
 from ..core.cameras.generate import auto_views, cut_to_scene
 from ..core.errors import InputFileError
@@ -41,7 +42,9 @@ def load_npy(path: Path, what: str) -> np.ndarray:
     """A user's .npy file as an array; an empty, truncated or malformed one (or a pickle, or a .npz) is one line
     naming it. The file is mapped before it is copied, so a header that declares more than the file holds is
     refused rather than allocated."""
-    head = _head(path)
+    head = b""
+    with contextlib.suppress(OSError):  # a file that cannot be opened: np.load says why, below
+        head = read_head(path, len(NPY_MAGIC))
     if head and not head.startswith((NPY_MAGIC[: len(head)], ZIP_MAGIC)):  # a .npz is a zip: named below
         raise InputFileError(path, f"{what} is not a .npy file (it starts with {head!r})")
     try:
@@ -56,17 +59,8 @@ def load_npy(path: Path, what: str) -> np.ndarray:
     return np.array(array)
 
 
-NPY_MAGIC, ZIP_MAGIC = b"\x93NUMPY", b"PK\x03\x04"
-"""How every .npy file starts (numpy reads anything else as a pickle, and its error says so), and a .npz."""
-
-
-def _head(path: Path) -> bytes:
-    """The first bytes of a file, enough for its magic (empty when it cannot be opened: the loader says why)."""
-    try:
-        with open(path, "rb") as f:
-            return f.read(len(NPY_MAGIC))
-    except OSError:
-        return b""
+NPY_MAGIC = b"\x93NUMPY"
+"""How every .npy file starts (numpy reads anything else as a pickle, and its error says so)."""
 
 
 def load_region(path: Path, n: int) -> np.ndarray:

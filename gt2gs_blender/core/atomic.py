@@ -24,6 +24,9 @@ PathLike = str | os.PathLike
 Named = tuple[str, PathLike | None]
 """A file the user named, with what the command calls it ("the scene", "--report"); None: not given."""
 
+ZIP_MAGIC = b"PK\x03\x04"
+"""How a zip archive starts (a SOG file, a .npz, a torch.save file)."""
+
 NAME_MAX = 255
 """The longest file name (bytes) the common file systems take."""
 
@@ -68,6 +71,12 @@ def require_input(what: str, path: PathLike, *, folder: bool = False) -> None:
         return
     expected = "a file or a folder" if folder else "a file"
     raise InputFileError(path, f"the {what} is {_kind(mode)}, not {expected}")
+
+
+def read_head(path: PathLike, size: int) -> bytes:
+    """The first ``size`` bytes of a user's file, to know what it is before a reader opens it (OSError as ``open``)."""
+    with open(path, "rb") as f:
+        return f.read(size)
 
 
 def check_outputs(outputs: Sequence[Named], inputs: Sequence[Named], new_folders: Sequence[PathLike] = ()) -> None:

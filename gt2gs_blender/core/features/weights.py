@@ -21,6 +21,7 @@ from typing import Any
 
 import torch
 
+from ..atomic import ZIP_MAGIC, read_head
 from ..errors import GT2GSError, InputFileError
 from .specs import FALLBACK_SEED, SPECS, VGG16_RELU3, VGG19_NORM_RELU3, FeatureSpec
 
@@ -111,11 +112,10 @@ def _require_torch_file(path: str | os.PathLike) -> None:
     """Refuse a file that is neither of torch.save's formats (a zip archive, or a pickle: protocol byte 0x80) before
     torch reads it, whose errors for a foreign file say nothing about the file."""
     try:
-        with open(path, "rb") as f:
-            head = f.read(4)
+        head = read_head(path, len(ZIP_MAGIC))
     except OSError as exc:
         raise InputFileError(path, f"cannot read the weights ({exc.strerror or exc})") from None
-    if not head.startswith((b"PK\x03\x04", b"\x80")):
+    if not head.startswith((ZIP_MAGIC, b"\x80")):
         raise InputFileError(path, f"is not a PyTorch weights file (.pth); it starts with {head!r}")
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..atomic import ZIP_MAGIC, read_head
 from ..errors import SplatFormatError
 from .arrays import SplatArrays
 from .codec import PathLike, as_arrays
@@ -107,7 +108,7 @@ def detect_format(path: PathLike) -> str:
     head = _head(path)
     if head.startswith((b"ply\n", b"ply\r\n")):
         return COMPRESSED_PLY if is_compressed_ply(read_ply_header(path)) else PLY
-    if head.startswith(b"PK\x03\x04") or (path.name == SOG_META and head.lstrip().startswith(b"{")):
+    if head.startswith(ZIP_MAGIC) or (path.name == SOG_META and head.lstrip().startswith(b"{")):
         return SOG
     if head.startswith((b"\x1f\x8b", SPZ_MAGIC)):  # versions 2-3 are gzip streams, version 4 starts bare
         return SPZ
@@ -124,8 +125,7 @@ def detect_format(path: PathLike) -> str:
 def _head(path: Path, size: int = 16) -> bytes:
     """The first bytes of a file; a missing or unreadable one is an error naming it."""
     try:
-        with open(path, "rb") as f:
-            return f.read(size)
+        return read_head(path, size)
     except FileNotFoundError:
         raise SplatFormatError(path, "no such file") from None
     except OSError as exc:
