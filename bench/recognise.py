@@ -34,7 +34,8 @@ views to the original scene's, on the object's pixels: how much of the user's sc
 definition; ``layout-surface`` rows are unshaded (``layout_images`` without the shade), and they and
 ``layout-target`` rows cover every pixel the measure counts. ``colour_specks`` ("specks") is the share of the
 object's pixels whose hue stands out from their neighbourhood: colour noise a run adds (the original row holds the
-scene's own: sprinkles, flowers).
+scene's own: sprinkles, flowers). ``accent_shift`` ("accents") is how far the original's small, vivid features (a
+robot's eyes, sprinkles) moved in colour (Lab a, b; NaN where a scene has none).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -99,6 +100,7 @@ SUMMED = (
     "original_preview_gabor",
     "content_ssim",
     "colour_specks",
+    "accent_shift",
 )
 """The row fields a summary averages per scene and variant."""
 Views = list[tuple[np.ndarray, np.ndarray]]
@@ -106,6 +108,10 @@ Views = list[tuple[np.ndarray, np.ndarray]]
 SPECK_WINDOW = 5
 SPECK_CHROMA = 0.06
 """A chroma step a viewer sees as a dot of another hue (the woven straw's magenta dots: ~0.2)."""
+ACCENT_CHROMA = 25.0
+ACCENT_APART = 20.0
+ACCENT_WINDOW = 21
+"""An accent pixel: chroma over 25 Lab units, its (a, b) over 20 from its 21 px neighbourhood's median."""
 TILE = 160
 SHEET_VIEWS = 2
 """Held-out views per result on the contact sheet."""
@@ -211,9 +217,32 @@ def colour_specks(views: Views, original: Views) -> float:
     return float(np.mean(values)) if values else float("nan")
 
 
+def accent_shift(views: Views, original: Views) -> float:
+    """Are the scene's small, vivid features still their colour (a robot's eyes, sprinkles): the mean Lab (a, b)
+    distance of each view to the original's render of it over the original's accent pixels (object pixels of chroma
+    over ``ACCENT_CHROMA`` lying more than ``ACCENT_APART`` from the median (a, b) of their ``ACCENT_WINDOW`` px
+    neighbourhood), pooled over the views; NaN where the scene shows none. Judged on the renders, apart from the
+    engine's rule (which weighs splats, not pixels)."""
+    shifts = []
+    for (rgb, _), (reference, alpha) in zip(views, original, strict=True):
+        lab_then = cv2.cvtColor(reference, cv2.COLOR_RGB2Lab)  # uint8: a and b offset by 128
+        around = np.stack([cv2.medianBlur(lab_then[..., c], ACCENT_WINDOW) for c in (1, 2)], axis=-1)
+        ab_then, ab = (cv2.cvtColor(measure.to_float(x), cv2.COLOR_RGB2Lab)[..., 1:] for x in (reference, rgb))
+        apart = np.linalg.norm(lab_then[..., 1:].astype(np.float32) - around, axis=-1) * (255.0 / 256.0)
+        accent = (
+            (alpha > measure.MASK_ALPHA) & (np.linalg.norm(ab_then, axis=-1) > ACCENT_CHROMA) & (apart > ACCENT_APART)
+        )
+        shifts.extend(np.linalg.norm(ab[accent] - ab_then[accent], axis=-1))
+    return float(np.mean(shifts)) if shifts else float("nan")
+
+
 def scene_side(views: Views, original: Views) -> dict[str, float]:
-    """The row's measures of the scene's side: ``content_ssim`` and ``colour_specks``."""
-    return {"content_ssim": content_ssim(views, original), "colour_specks": colour_specks(views, original)}
+    """The row's measures of the scene's side: ``content_ssim``, ``colour_specks`` and ``accent_shift``."""
+    return {
+        "content_ssim": content_ssim(views, original),
+        "colour_specks": colour_specks(views, original),
+        "accent_shift": accent_shift(views, original),
+    }
 
 
 def from_preview(views: list[measure.ViewStats], preview: list[measure.ViewStats]) -> dict[str, float]:
@@ -483,7 +512,7 @@ def is_transfer(variant: str) -> bool:
 def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
     print(
         f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10} "
-        f"{'specks':>6}   from preview gram / gabor (original's)"
+        f"{'specks':>6} {'accents':>7}   from preview gram / gabor (original's)"
     )
     for r in rows:
         sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
@@ -495,11 +524,12 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
             preview += f" vs {r['preview_reference']}"
         print(
             f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
-            f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f}   {preview}"
+            f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f} {r['accent_shift']:>7.1f}   {preview}"
         )
     print(
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
-        "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean)"
+        "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean), "
+        "accents (Lab a, b shift of the original's small, vivid features; mean)"
     )
     met: dict[str, bool] = {}
     for scene, variants in summary.items():
@@ -514,7 +544,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
-                f"specks {s['mean_colour_specks']:.3f}{preview}"
+                f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}{preview}"
             )
             if is_transfer(variant):
                 met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED

@@ -9,6 +9,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import torch
@@ -82,3 +83,22 @@ def test_colour_specks_count_dots_of_another_hue_and_not_light_and_dark():
     half = alpha.copy()
     half[:, 30:] = 0.0  # the object's left half holds 6 of the dots (columns 10 and 25)
     assert recognise.colour_specks([(magenta, alpha)], [(grey, half)]) == pytest.approx(6 / 1800)
+
+
+def test_accent_shift_is_how_far_small_vivid_features_moved_in_colour():
+    """The bench's accent measure: blue dots on grey (a robot's eyes) kept are 0; turned grey, the shift is the blue's
+    Lab (a, b) distance from grey (OpenCV's Lab, the oracle); a large blue half is no small feature: with none, NaN."""
+    grey = np.full((60, 60, 3), 128, np.uint8)
+    alpha = np.ones((60, 60), np.float32)
+    dots = (slice(10, 50, 15), slice(10, 50, 15))
+    blue = grey.copy()
+    blue[dots] = (40, 60, 220)
+    assert recognise.accent_shift([(blue, alpha)], [(blue, alpha)]) == 0.0
+    lab = cv2.cvtColor(np.array([[[40, 60, 220], [128, 128, 128]]], np.float32) / 255.0, cv2.COLOR_RGB2Lab)[0, :, 1:]
+    assert recognise.accent_shift([(grey, alpha)], [(blue, alpha)]) == pytest.approx(np.linalg.norm(lab[0] - lab[1]))
+    halves = grey.copy()
+    halves[:, 30:] = (40, 60, 220)
+    shifted = halves.copy()
+    shifted[:, 30:] = 128
+    assert np.isnan(recognise.accent_shift([(shifted, alpha)], [(halves, alpha)]))  # each pixel like its neighbours
+    assert np.isnan(recognise.accent_shift([(grey, alpha)], [(grey, alpha)]))
