@@ -34,7 +34,14 @@ from recognise_measure import MASK_ALPHA
 from gt2gs_blender.core.api import Camera, GaussianScene, TransferConfig, auto_views, load_views, read_scene
 from gt2gs_blender.core.cameras.warp import expected_depth
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
-from gt2gs_blender.core.transfer.layout import bright_images, layout_bright, layout_images, layout_shading, shade_width
+from gt2gs_blender.core.transfer.layout import (
+    bright_images,
+    layout_bright,
+    layout_images,
+    layout_shading,
+    scene_colour_mix,
+    shade_width,
+)
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.plan import RunPlan, plan_run, run_texture
 from gt2gs_blender.core.transfer.shade import laid_exposure
@@ -157,7 +164,7 @@ def layout_surface(
         kept is not None,
         shade_width(run.frame, config),
         config.keep_scene,
-        config.scene_colour,
+        scene_colour_mix(run.work, run.region, config, photo),
         exposure,
         lit,
     )

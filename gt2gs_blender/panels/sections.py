@@ -19,7 +19,7 @@ from typing import Any
 import bpy
 
 from ..blender import machine, textures, transfer_run, views
-from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, user_settings
+from ..core.transfer.config import MAX_DEPTH_RATIO, SETTINGS, keeps_scene, user_settings
 from ..core.transfer.setting import IN_SCENE, PARTS
 from .sidebar import CATEGORY, LABEL_CHARS, text_lines
 
@@ -45,6 +45,7 @@ FRONT = {
         "keep_scene",
         "keep_material",
         "scene_colour",
+        "keep_accents",
         "scene_brightness",
     ),
     "Views": ("n_views",),
@@ -115,6 +116,7 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "layout_projection": lambda s: s.layout,
     "keep_scene": lambda s: s.layout,
     "scene_colour": lambda s: s.layout,
+    "keep_accents": lambda s: s.layout and s.scene_colour < 1 and keeps_scene(s),  # raises what is kept
     "scene_brightness": lambda s: s.layout,
     "keep_material": lambda s: s.layout and (s.keep_scene > 0 or s.scene_brightness > 0),  # the shade, the exposure
     "shade_softness": lambda s: s.layout and (s.keep_scene > 0 or s.scene_colour > 0),  # what it averages

@@ -40,6 +40,7 @@ PREVIEWED = (
     "keep_scene",
     "keep_material",
     "scene_colour",
+    "keep_accents",
     "scene_brightness",
     "shade_softness",
     "texture_softness",

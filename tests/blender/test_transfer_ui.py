@@ -615,6 +615,7 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
         "keep_scene",
         "keep_material",
         "scene_colour",
+        "keep_accents",
         "scene_brightness",
     ]
     assert sections.section_settings("Texture") == []
@@ -695,11 +696,13 @@ def test_settings_a_run_ignores_are_greyed_out(fresh):
     assert setting_used(settings, "shade_softness")
     settings.keep_scene = 0.0
     assert setting_used(settings, "shade_softness")  # the colour it keeps is still averaged over it
+    assert setting_used(settings, "keep_accents")
     settings.scene_colour = 0.0
     assert not setting_used(settings, "shade_softness") and setting_used(settings, "keep_scene")
     assert setting_used(settings, "keep_material")  # Scene Brightness still takes its share of the exposure
     settings.scene_brightness = 0.0
     assert not setting_used(settings, "keep_material")  # neither a shade nor an exposure left to take it
+    assert not setting_used(settings, "keep_accents")  # the texture alone: no colour of the scene to raise
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
     assert setting_used(settings, "angle")

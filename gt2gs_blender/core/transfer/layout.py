@@ -53,12 +53,22 @@ from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
 from ..scene.parts import find_parts
+from .accents import ColourShare, colour_share
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .grain import periodic_blur
 from .losses import LUMA
 from .setting import Projection
-from .shade import bright_end, kept_scene, layout_shade, material_bright, shading, spatial_blur, under_scene
+from .shade import (
+    bright_end,
+    coverage_weights,
+    kept_scene,
+    layout_shade,
+    material_bright,
+    shading,
+    spatial_blur,
+    under_scene,
+)
 from .texture_bank import bank_scales, screen_rotation
 from .views import ViewSet
 
@@ -288,7 +298,7 @@ def layout_images(
     shaded: bool = False,
     softness: float = 0.0,
     keep: float = 1.0,
-    colour: float = 0.0,
+    colour: float | ColourShare = 0.0,
     exposure: float = 1.0,
     bright: Sequence[torch.Tensor] | None = None,
 ) -> list[torch.Tensor]:
@@ -297,10 +307,10 @@ def layout_images(
     the structure a render of the laid-out splats only approximates (coverage 0 where the view sees no surface).
     ``shaded``: over the view's own scene as the layout lays it (:func:`under_scene`): its colour averaged over
     the surface points within about ``softness`` (a world length, by :func:`spatial_blur`), the texture times
-    that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in, the mix at the
-    splats' ``exposure`` (:func:`laid_exposure`); the shade is taken against the bright end of the view's
-    surface, or against ``bright`` (H, W per view: the luminance each pixel's material shows fully lit,
-    :func:`bright_images`)."""
+    that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in (one share, or each
+    colour's: :func:`scene_colour_mix`), the mix at the splats' ``exposure`` (:func:`laid_exposure`); the shade is
+    taken against the bright end of the view's surface, or against ``bright`` (H, W per view: the luminance each
+    pixel's material shows fully lit, :func:`bright_images`)."""
     images = []
     lit_at = [None] * len(views.cameras) if bright is None else bright
     for camera, depth, alpha, premultiplied, lit in zip(
@@ -457,7 +467,23 @@ def layout_shading(
         return None
     width = shade_width(frame, config)
     brightness = config.scene_brightness * config.keep_material
-    return layout_shade(scene, rows, width, config.keep_scene, config.scene_colour, texture, brightness, bright)
+    mix = scene_colour_mix(scene, rows, config, texture)
+    return layout_shade(scene, rows, width, config.keep_scene, mix, texture, brightness, bright)
+
+
+def scene_colour_mix(
+    scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig, texture: np.ndarray
+) -> float | ColourShare:
+    """How much of its own colour each part of ``scene`` keeps under ``texture`` (:func:`colour_share`):
+    ``scene_colour``, raised by ``keep_accents`` for the rare, vivid colours among the splats of ``rows`` (all when
+    None) as they cover a view, when the run keeps anything of the scene (else the texture alone)."""
+    if not keeps_scene(config) or config.keep_accents <= 0:
+        return config.scene_colour
+    part = slice(None) if rows is None else rows
+    weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
+    colours = scene.base_colors.detach()[part].clamp(0.0, 1.0)
+    tone = float(np.asarray(texture[..., :3], np.float32).reshape(-1, 3).mean(0) @ np.asarray(LUMA, np.float32))
+    return colour_share(colours, weights, config.scene_colour, config.keep_accents, tone)
 
 
 def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> torch.Tensor | None:

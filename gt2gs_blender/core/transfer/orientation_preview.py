@@ -26,9 +26,10 @@ from ..cameras.camera import Camera
 from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
+from .accents import ColourShare
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
-from .layout import lay_out, layout_bright, layout_shading
+from .layout import lay_out, layout_bright, layout_shading, scene_colour_mix
 from .losses import LUMA
 from .plan import RunPlan, plan_run
 from .region import assemble
@@ -65,11 +66,12 @@ def orientation_preview(
     background: tuple[float, float, float] = (1.0, 1.0, 1.0),
     backend: str = "auto",
     keep: float = 1.0,
-    colour: float = 0.0,
+    colour: float | ColourShare = 0.0,
 ) -> np.ndarray:
     """(H, W, 3) uint8 preview of ``camera`` resized to longest side ``size``, the texture over the scene as
     the layout lays it (:func:`under_scene`): shaded by the scene's luminance to the power ``keep`` (the run's
-    ``keep_scene``), with ``colour`` of the scene's own colour mixed in (its ``scene_colour``).
+    ``keep_scene``), with ``colour`` of the scene's own colour mixed in (its ``scene_colour`` and accents:
+    :func:`scene_colour_mix`).
 
     ``texture_height`` is the transfer's setting and ``pixel_scale`` ``camera``'s focal length over the transfer's
     views': the texture appears as large on screen as the transfer's texture bank makes it (its nearest scale spans
@@ -172,7 +174,7 @@ def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:
         background=config.background,
         backend=config.backend,
         keep=config.keep_scene,
-        colour=config.scene_colour,
+        colour=scene_colour_mix(plan.work, plan.region, config, plan.texture),
     )
 
 

@@ -29,7 +29,15 @@ from .bank import build_bank, nnfm_bank
 from .config import TransferConfig, keeps_scene, splits_first, splits_last
 from .content import content_degree
 from .detail import add_detail, split_for_detail
-from .layout import bright_images, lay_out, layout_bright, layout_images, layout_shading, shade_width
+from .layout import (
+    bright_images,
+    lay_out,
+    layout_bright,
+    layout_images,
+    layout_shading,
+    scene_colour_mix,
+    shade_width,
+)
 from .metrics import COVERED, MEASURE_SIDE, MEASURE_STRIDE, preview_ssim
 from .orientation_preview import first_view, show
 from .plan import RunPlan, plan_run
@@ -236,6 +244,8 @@ def _prepare(plan: RunPlan) -> Prepared:
     laying = frame is not None and config.layout
     bright = layout_bright(work, region, config) if laying else None
     shade = layout_shading(work, region, frame, config, image, bright) if laying else None
+    # what of its own colour each part keeps, taken before the layout recolours the splats
+    mix = scene_colour_mix(work, region, config, image) if laying else config.scene_colour
     measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
     lit = bright_images(work, plan.used, bright, config.backend) if measured else None
     if config.color_transfer and not laying:  # the layout lays its own colours on every restyled splat
@@ -270,7 +280,7 @@ def _prepare(plan: RunPlan) -> Prepared:
     if laying and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
         ideal = layout_images(
-            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, config.scene_colour, exposure, lit
+            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, mix, exposure, lit
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     return Prepared(plan, work, region, shade, extractor, targets, laid_out, start_view, n_work)

@@ -32,6 +32,7 @@ import torch
 import torch.nn.functional as F
 
 from ..scene.gaussians import GaussianScene
+from .accents import ColourShare
 from .losses import LUMA
 
 SHADE_MIN = 0.02
@@ -66,7 +67,7 @@ def layout_shade(
     rows: torch.Tensor | None = None,
     softness: float = 0.0,
     keep: float = 1.0,
-    colour: float = 0.0,
+    colour: float | ColourShare = 0.0,
     texture: np.ndarray | None = None,
     brightness: float = 0.0,
     bright: torch.Tensor | None = None,
@@ -171,12 +172,17 @@ def lit(colours: torch.Tensor, luminance: torch.Tensor, wanted: torch.Tensor) ->
     return fitted + short[..., None] * (1.0 - fitted)
 
 
-def kept_scene(shade: torch.Tensor, colours: torch.Tensor, colour: float, exposure: float = 1.0) -> torch.Tensor:
+def kept_scene(
+    shade: torch.Tensor, colours: torch.Tensor, colour: float | ColourShare, exposure: float = 1.0
+) -> torch.Tensor:
     """(N, 5): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the scene's
-    own ``colours`` (N, 3) is mixed under it, that colour's share, and the mix's exposure (the scene's
-    brightness, :func:`exposed`): what :func:`under_scene` applies."""
+    own ``colours`` (N, 3) is mixed under it (one share for all, or each colour's own: :class:`ColourShare`),
+    what that mix adds, and the mix's exposure (the scene's brightness, :func:`exposed`): what
+    :func:`under_scene` applies."""
     exposures = torch.full_like(shade[:, None], exposure)
-    return torch.cat([(1.0 - colour) * shade[:, None], colour * colours.to(shade), exposures], dim=1)
+    colours = colours.to(shade)
+    share, added = colour.mixed(colours, shade) if isinstance(colour, ColourShare) else (colour, colour * colours)
+    return torch.cat([(1.0 - share) * shade[:, None], added, exposures], dim=1)
 
 
 def under_scene(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
