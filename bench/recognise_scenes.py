@@ -164,7 +164,7 @@ def layout_surface(
         kept is not None,
         shade_width(run.frame, config),
         config.keep_scene,
-        scene_colour_mix(run.work, run.region, config, photo),
+        scene_colour_mix(run.work, run.region, config),
         exposure,
         lit,
     )

@@ -13,6 +13,7 @@ from gt2gs_blender.core.render import render
 from gt2gs_blender.core.transfer.accents import COMMON, ColourShare, colour_share
 from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.layout import layout_frame, layout_images, scene_colour_mix, with_colours
+from gt2gs_blender.core.transfer.shade import kept_scene, under_scene
 from gt2gs_blender.core.transfer.views import render_views
 from tests.test_layout import front_camera, wall, zero_step_config
 
@@ -37,26 +38,41 @@ def expected_share(base: float, keep: float, share_of_scene: float) -> float:
 
 def test_a_rare_vivid_colour_keeps_more_of_itself_and_grey_or_common_ones_keep_scene_colour():
     colours = torch.tensor([VIVID_BLUE] * 2 + [GREY] * 98)
-    share = colour_share(colours, torch.ones(100), 0.15, 0.8, 0.5)
+    share = colour_share(colours, torch.ones(100), 0.15, 0.8)
     assert isinstance(share, ColourShare)
     got = share(colours).numpy()
     assert got[0] == pytest.approx(expected_share(0.15, 0.8, 0.02), abs=0.01)
     assert got[2:] == pytest.approx(0.15, abs=1e-6)  # grey: nothing vivid to keep
     halves = torch.tensor([VIVID_BLUE] * 50 + [(0.9, 0.3, 0.1)] * 50)  # vivid, but half the scene each
-    assert colour_share(halves, torch.ones(100), 0.15, 0.8, 0.5)(halves).numpy() == pytest.approx(0.15, abs=1e-6)
+    assert colour_share(halves, torch.ones(100), 0.15, 0.8)(halves).numpy() == pytest.approx(0.15, abs=1e-6)
     rare_grey = torch.tensor([(0.1, 0.1, 0.1)] * 2 + [VIVID_BLUE] * 98)  # rare, but grey
-    kept = colour_share(rare_grey, torch.ones(100), 0.15, 0.8, 0.5)(rare_grey)
+    kept = colour_share(rare_grey, torch.ones(100), 0.15, 0.8)(rare_grey)
     assert kept[:2].numpy() == pytest.approx(0.15, abs=1e-6)
+
+
+def test_an_accent_takes_its_hue_and_keeps_the_texture_s_light_and_dark():
+    """Under any texture an accent's mix has the luminance the mix without Keep Accents has (the texture's pattern
+    runs on through it), and its hue turns to the accent's own: the blue channel's share rises."""
+    colours = torch.tensor([VIVID_BLUE] * 2 + [GREY] * 98)
+    shade = torch.rand(100, generator=torch.Generator().manual_seed(0)) * 0.8 + 0.1
+    texture = torch.rand(100, 3, generator=torch.Generator().manual_seed(1)) * 0.5
+    share = colour_share(colours, torch.ones(100), 0.15, 0.8)
+    plain, accented = (under_scene(texture, kept_scene(shade, colours, c)) for c in (0.15, share))
+    luma = torch.tensor(LUMA, dtype=torch.float32)
+    assert torch.allclose(accented @ luma, plain @ luma, atol=1e-6)
+    assert torch.equal(accented[2:], plain[2:])  # grey: no accent, the same mix
+    blue_share = (accented[:2, 2] / accented[:2].sum(1)).mean(), (plain[:2, 2] / plain[:2].sum(1)).mean()
+    assert blue_share[0] > blue_share[1] + 0.1
 
 
 def test_the_share_weighs_splats_by_what_they_cover_and_is_plain_when_off_or_empty():
     colours = torch.tensor([VIVID_BLUE] * 2 + [GREY] * 98)
     heavy = torch.ones(100)
     heavy[:2] = 49.0  # two huge blue splats cover half the view: common, no accent
-    assert colour_share(colours, heavy, 0.15, 0.8, 0.5)(colours)[0] == pytest.approx(0.15, abs=1e-6)
-    assert colour_share(colours, torch.ones(100), 0.15, 0.0, 0.5) == 0.15
-    assert colour_share(colours, torch.zeros(100), 0.3, 0.8, 0.5) == 0.3
-    assert colour_share(colours[:0], torch.ones(0), 0.3, 0.8, 0.5) == 0.3
+    assert colour_share(colours, heavy, 0.15, 0.8)(colours)[0] == pytest.approx(0.15, abs=1e-6)
+    assert colour_share(colours, torch.ones(100), 0.15, 0.0) == 0.15
+    assert colour_share(colours, torch.zeros(100), 0.3, 0.8) == 0.3
+    assert colour_share(colours[:0], torch.ones(0), 0.3, 0.8) == 0.3
 
 
 def test_with_nothing_of_the_scene_kept_accents_keep_nothing_either():
@@ -64,9 +80,8 @@ def test_with_nothing_of_the_scene_kept_accents_keep_nothing_either():
     comes back through Keep Accents."""
     scene, _, _ = spotted_wall()
     alone = TransferConfig(keep_scene=0.0, scene_colour=0.0, scene_brightness=0.0, keep_accents=1.0)
-    texture = np.full((8, 8, 3), 0.5, np.float32)
-    assert scene_colour_mix(scene, None, alone, texture) == 0.0
-    assert isinstance(scene_colour_mix(scene, None, replace(alone, keep_scene=0.5), texture), ColourShare)
+    assert scene_colour_mix(scene, None, alone) == 0.0
+    assert isinstance(scene_colour_mix(scene, None, replace(alone, keep_scene=0.5)), ColourShare)
 
 
 @pytest.mark.parametrize("keep", [0.8, 0.0])
@@ -101,7 +116,7 @@ def test_a_run_keeps_a_small_vivid_spot_its_colour_on_the_splats_the_preview_and
     assert np.abs(preview(scene, grey, [cam], config, size=96).image.astype(np.float32) - shown).max() <= 1.0
 
     views = render_views(scene, [cam], torch.zeros(3), "auto")
-    mix = colour_share(scene.base_colors, torch.ones(len(scene)), 0.15, keep, 0.3)
+    mix = colour_share(scene.base_colors, torch.ones(len(scene)), 0.15, keep)
     (ideal,) = layout_images(views, grey, layout_frame(scene, views, config), 0.0, True, keep=1.0, colour=mix)
     middle = ideal[47:49, 47:49]  # the spot's middle on screen (it spans 7 px)
     assert middle[..., :3].reshape(-1, 3).mean(0).numpy() == pytest.approx(expected, abs=0.03)

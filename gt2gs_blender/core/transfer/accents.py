@@ -5,10 +5,10 @@ A colour is an accent as far as it is vivid (CIE Lab chroma across ``VIVID``) an
 weighed by how much of a view it covers, hold less than ``COMMON`` of their weight near it (a Gaussian of ``NEAR``
 Lab units over a and b). The robot's orange shell and the guitar's sunburst are vivid but common, so they take the
 texture as the other parts do; the robot's cyan eyes and the glow they cast, and the donut's blue sprinkles, keep
-most of their own colour. An accent keeps its hue at the brightness the shaded texture has there (the scene's
-light and dark times the texture's mean luminance), not at its own: a dark sprinkle stays darker than the icing
-under a dark texture, as it is in the capture, where at its own brightness it came out lighter. One table over
-(a, b) per run (:class:`ColourShare`), so the splats, the layout term's images and the preview follow one rule.
+most of their own colour. An accent keeps its hue only: its light and dark stay the shaded texture's, so the
+texture's pattern runs on through it (a flat hue there interrupted the pattern, and the measure lost a donut's toy
+bricks). One table over (a, b) per run (:class:`ColourShare`), so the splats, the layout term's images and the
+preview follow one rule.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ EXTENT = 128.0
 """The table's cells (Lab a, b units) and its half-width: a and b of sRGB colours lie within it."""
 CELLS = round(2 * EXTENT / BIN)
 TONE_FLOOR = 0.02
-"""Colours darker than this luminance count as this when their hue is scaled to the texture's brightness."""
+"""Colours darker than this luminance count as this when their hue is taken apart from their light and dark."""
 
 
 @dataclass(frozen=True)
@@ -45,8 +45,6 @@ class ColourShare:
     keep: float
     rarity: np.ndarray
     """(B, B) over Lab (a, b), in 0..1: 1 where the scene holds no weight near that colour."""
-    tone: float
-    """The texture's mean luminance: an accent's hue is kept at its shade times this."""
 
     def __call__(self, colours: torch.Tensor) -> torch.Tensor:
         """(N,) the share of each of ``colours`` (N, 3 sRGB in 0..1) that stays under the texture."""
@@ -57,14 +55,15 @@ class ColourShare:
         accent = torch.from_numpy(self.accent(colours.detach().float().cpu().numpy()))
         return ((1.0 - self.base) * self.keep * accent).to(colours)
 
-    def mixed(self, colours: torch.Tensor, shade: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(N, 1) the share of ``colours`` (N, 3 sRGB in 0..1, shaded ``shade`` (N,) under the texture) that
-        stays, and (N, 3) what it adds: ``base`` of each colour as it is, and the accent's share of its hue at the
-        shaded texture's brightness (``shade`` times ``tone``)."""
+    def mixed(self, colours: torch.Tensor, shade: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """For ``colours`` (N, 3 sRGB in 0..1) shaded ``shade`` (N,) under the texture: (N, 1) the share that stays,
+        (N, 3) what ``base`` of each colour adds as it is, and (N, 3) the accent's hue, which the texture's
+        luminance scales (its raise of the share, times the shade, over the colour's own luminance): the mix keeps
+        the luminance the texture alone gives it and takes the accent's hue."""
         raised = self.raised(colours)[:, None]
         luminance = (colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)).clamp_min(TONE_FLOOR)
-        hue_at = (colours * (shade * self.tone / luminance)[:, None]).clamp(0.0, 1.0)
-        return self.base + raised, self.base * colours + raised * hue_at
+        hue = raised * shade[:, None] * colours / luminance[:, None]
+        return self.base + raised, self.base * colours, hue
 
     def accent(self, colours: np.ndarray) -> np.ndarray:
         """(N,) how much of an accent each of ``colours`` (N, 3 sRGB in 0..1) is: vivid times rare."""
@@ -74,12 +73,10 @@ class ColourShare:
         return (vivid * self.rarity[_cell(lab[:, 1]), _cell(lab[:, 2])]).astype(np.float32)
 
 
-def colour_share(
-    colours: torch.Tensor, weights: torch.Tensor, base: float, keep: float, tone: float
-) -> float | ColourShare:
-    """What of the scene's own colour a run keeps under a texture of mean luminance ``tone``: ``base`` alone when
-    ``keep`` is 0 (or the scene has no weight), else a :class:`ColourShare` whose rarity comes from ``colours``
-    (N, 3 sRGB in 0..1) weighed by ``weights`` (N,)."""
+def colour_share(colours: torch.Tensor, weights: torch.Tensor, base: float, keep: float) -> float | ColourShare:
+    """What of the scene's own colour a run keeps under the texture: ``base`` alone when ``keep`` is 0 (or the
+    scene has no weight), else a :class:`ColourShare` whose rarity comes from ``colours`` (N, 3 sRGB in 0..1)
+    weighed by ``weights`` (N,)."""
     w = weights.detach().double().cpu().numpy().clip(0.0, None)
     if keep <= 0.0 or not len(w) or float(w.sum()) <= 0.0:
         return base
@@ -88,7 +85,7 @@ def colour_share(
     np.add.at(share, (_cell(lab[:, 1]), _cell(lab[:, 2])), w / w.sum())
     sigma = NEAR / BIN
     near = cv2.GaussianBlur(share, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT) * (2.0 * np.pi * sigma**2)
-    return ColourShare(base, keep, np.clip(1.0 - near / COMMON, 0.0, 1.0), tone)
+    return ColourShare(base, keep, np.clip(1.0 - near / COMMON, 0.0, 1.0))
 
 
 def _cell(values: np.ndarray) -> np.ndarray:

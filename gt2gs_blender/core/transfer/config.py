@@ -131,12 +131,12 @@ class TransferConfig(SpeedSettings):
         max=1.0,
     )
     keep_accents: float = setting(
-        0.0,
+        0.8,
         "Keep Accents",
-        "How much of the capture's rare, vivid colours stays under the laid-out texture (a robot's glowing "
-        "eyes, a donut's sprinkles, a logo: colours few splats have): 0 gives them only the Scene Colour every "
-        "part keeps; 0.8 keeps most of their hue, as light or dark as the texture is there, so they still read "
-        "as what they are (the texture's pattern shows less around them); 1 keeps all of their hue",
+        "How much of the capture's rare, vivid colours keeps its hue under the laid-out texture (a robot's "
+        "glowing eyes, a donut's sprinkles, a logo: colours few splats have); the texture's light and dark run on "
+        "through them: 0.8 keeps most of their hue, so they still read as what they are; 0 gives them only the "
+        "Scene Colour every part keeps; 1 all of it",
         "texture",
         min=0.0,
         max=1.0,

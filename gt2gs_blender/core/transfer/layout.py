@@ -467,14 +467,12 @@ def layout_shading(
         return None
     width = shade_width(frame, config)
     brightness = config.scene_brightness * config.keep_material
-    mix = scene_colour_mix(scene, rows, config, texture)
+    mix = scene_colour_mix(scene, rows, config)
     return layout_shade(scene, rows, width, config.keep_scene, mix, texture, brightness, bright)
 
 
-def scene_colour_mix(
-    scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig, texture: np.ndarray
-) -> float | ColourShare:
-    """How much of its own colour each part of ``scene`` keeps under ``texture`` (:func:`colour_share`):
+def scene_colour_mix(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> float | ColourShare:
+    """How much of its own colour each part of ``scene`` keeps under the texture (:func:`colour_share`):
     ``scene_colour``, raised by ``keep_accents`` for the rare, vivid colours among the splats of ``rows`` (all when
     None) as they cover a view, when the run keeps anything of the scene (else the texture alone)."""
     if not keeps_scene(config) or config.keep_accents <= 0:
@@ -482,8 +480,7 @@ def scene_colour_mix(
     part = slice(None) if rows is None else rows
     weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
     colours = scene.base_colors.detach()[part].clamp(0.0, 1.0)
-    tone = float(np.asarray(texture[..., :3], np.float32).reshape(-1, 3).mean(0) @ np.asarray(LUMA, np.float32))
-    return colour_share(colours, weights, config.scene_colour, config.keep_accents, tone)
+    return colour_share(colours, weights, config.scene_colour, config.keep_accents)
 
 
 def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> torch.Tensor | None:

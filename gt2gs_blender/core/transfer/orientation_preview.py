@@ -174,7 +174,7 @@ def sketch(plan: RunPlan, camera: Camera, size: int = 256) -> np.ndarray:
         background=config.background,
         backend=config.backend,
         keep=config.keep_scene,
-        colour=scene_colour_mix(plan.work, plan.region, config, plan.texture),
+        colour=scene_colour_mix(plan.work, plan.region, config),
     )
 
 

@@ -245,7 +245,7 @@ def _prepare(plan: RunPlan) -> Prepared:
     bright = layout_bright(work, region, config) if laying else None
     shade = layout_shading(work, region, frame, config, image, bright) if laying else None
     # what of its own colour each part keeps, taken before the layout recolours the splats
-    mix = scene_colour_mix(work, region, config, image) if laying else config.scene_colour
+    mix = scene_colour_mix(work, region, config) if laying else config.scene_colour
     measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
     lit = bright_images(work, plan.used, bright, config.backend) if measured else None
     if config.color_transfer and not laying:  # the layout lays its own colours on every restyled splat

@@ -2,12 +2,13 @@
 and dark, edges, parts, colours and overall brightness.
 
 Laid over a whole capture, the plain texture hid the scene (the fern's SSIM to the original fell from 0.49
-to 0.05). Each splat keeps three things of the scene (``layout_shade``, one (N, 5) row per splat):
+to 0.05). Each splat keeps three things of the scene (``layout_shade``, one (N, ``ROW``) row per splat):
 - its shade: its own original luminance over the bright end of the scene's, to the power ``keep_scene`` (0:
   the texture's own brightness everywhere; 1: the texture times the scene's luminance, an albedo under the
   capture's own shading);
 - a share ``scene_colour`` of its own colour mixed under the shaded texture, so parts that differ in hue only
-  (a donut's pink icing and beige dough, a robot's red eyes in a grey face) stay apart;
+  (a donut's pink icing and beige dough, a robot's red eyes in a grey face) stay apart, and more of its hue where
+  that colour is a rare, vivid accent (``keep_accents``, :mod:`.accents`), at the texture's light and dark;
 - the scene's overall brightness: one exposure for the whole run (``brightness_exposure``), so the mix's mean
   luminance is the scene's (``scene_brightness`` 1). Shaded by the scene's luminance over its bright end, a
   texture darker than white came out darker than the capture, a white one lighter. Lighter goes by a power
@@ -35,6 +36,8 @@ from ..scene.gaussians import GaussianScene
 from .accents import ColourShare
 from .losses import LUMA
 
+ROW = 8
+"""A splat's kept-scene row: the texture's gain, the colour added (3), the exposure, the accent's hue (3)."""
 SHADE_MIN = 0.02
 """Luminance ratios below this count as this (a black splat is a very dark one, not a zero to a power)."""
 SHADE_QUANTILE = 0.95
@@ -72,7 +75,7 @@ def layout_shade(
     brightness: float = 0.0,
     bright: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """(N, 5) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
+    """(N, ``ROW``) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
     averaged over its neighbours within about ``softness`` (a world length, 0: its own), that colour's
     luminance over the bright end of those splats' (or over each splat's own ``bright`` (N,), the luminance its
     material shows fully lit: :func:`material_bright`), to the power ``keep`` (:func:`shading`), and
@@ -111,12 +114,12 @@ def coverage_weights(scales: torch.Tensor, opacities: torch.Tensor) -> torch.Ten
 def brightness_exposure(
     texture: np.ndarray, kept: torch.Tensor, luminance: torch.Tensor, weights: torch.Tensor
 ) -> float:
-    """The exposure (:func:`exposed`) that gives ``texture`` (H, W, 3 in 0..1) laid over ``kept`` (N, 5,
+    """The exposure (:func:`exposed`) that gives ``texture`` (H, W, 3 in 0..1) laid over ``kept`` (N, ``ROW``,
     :func:`under_scene`, its exposure ignored) the ``weights``-averaged mean of the scene's ``luminance`` (N,):
     every splat paired with every texel of the texture area-averaged to ``EXPOSURE_TEXELS`` a side, as a layout
     tiling the surface samples it. 1 when nothing is weighed."""
     step = max(1, len(kept) // EXPOSURE_SPLATS)
-    rows, w = kept[::step, :4].float().cpu(), weights[::step].float().cpu().clamp_min(0.0)
+    rows, w = kept[::step].float().cpu(), weights[::step].float().cpu().clamp_min(0.0)
     if not len(rows) or float(w.sum()) <= 0:
         return 1.0
     w = w / w.sum()
@@ -124,7 +127,7 @@ def brightness_exposure(
     side = (EXPOSURE_TEXELS, EXPOSURE_TEXELS)
     small = cv2.resize(np.asarray(texture[..., :3], np.float32), side, interpolation=cv2.INTER_AREA)
     texels = torch.from_numpy(small.reshape(-1, 3))
-    mixed = (texels[None] * rows[:, None, :1] + rows[:, None, 1:4]).clamp(0.0, 1.0)  # (splats, texels, 3)
+    mixed = mix(texels[None], rows[:, None]).clamp(0.0, 1.0)  # (splats, texels, 3)
     return exposure_for(mixed @ torch.tensor(LUMA), target, w)
 
 
@@ -175,25 +178,36 @@ def lit(colours: torch.Tensor, luminance: torch.Tensor, wanted: torch.Tensor) ->
 def kept_scene(
     shade: torch.Tensor, colours: torch.Tensor, colour: float | ColourShare, exposure: float = 1.0
 ) -> torch.Tensor:
-    """(N, 5): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the scene's
-    own ``colours`` (N, 3) is mixed under it (one share for all, or each colour's own: :class:`ColourShare`),
-    what that mix adds, and the mix's exposure (the scene's brightness, :func:`exposed`): what
-    :func:`under_scene` applies."""
+    """(N, ``ROW``): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the
+    scene's own ``colours`` (N, 3) is mixed under it (one share for all, or each colour's own: :class:`ColourShare`),
+    what that mix adds, the mix's exposure (the scene's brightness, :func:`exposed`), and an accent's hue, which
+    the texture's luminance scales (:meth:`ColourShare.mixed`): what :func:`under_scene` applies."""
     exposures = torch.full_like(shade[:, None], exposure)
     colours = colours.to(shade)
-    share, added = colour.mixed(colours, shade) if isinstance(colour, ColourShare) else (colour, colour * colours)
-    return torch.cat([(1.0 - share) * shade[:, None], added, exposures], dim=1)
+    if isinstance(colour, ColourShare):
+        share, added, hue = colour.mixed(colours, shade)
+    else:
+        share, added, hue = colour, colour * colours, torch.zeros_like(colours)
+    return torch.cat([(1.0 - share) * shade[:, None], added, exposures, hue], dim=1)
 
 
 def under_scene(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
-    """(N, 3) ``texture`` colours laid over the scene ``kept`` (N, 5) row by row (:func:`kept_scene`): the
-    shaded texture plus the mixed-in share of the scene's own colour, at the row's exposure (:func:`exposed`)."""
+    """(N, 3) ``texture`` colours laid over the scene ``kept`` (N, ``ROW``) row by row (:func:`kept_scene`), at
+    the row's exposure (:func:`exposed`)."""
     kept = kept.to(texture)
-    mixed = texture * kept[:, :1] + kept[:, 1:4]
-    exposures = kept[:, 4:]
+    mixed = mix(texture, kept)
+    exposures = kept[:, 4:5]
     if bool((exposures == 1.0).all()):
         return mixed
     return exposed(mixed, exposures)
+
+
+def mix(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
+    """(..., 3) ``texture`` colours (..., 3) mixed with the scene ``kept`` (..., ``ROW``, broadcast against them)
+    before the exposure: the shaded texture, the mixed-in share of the scene's own colour and an accent's hue at
+    the texture's luminance."""
+    luminance = texture @ torch.tensor(LUMA, dtype=texture.dtype, device=texture.device)
+    return texture * kept[..., :1] + kept[..., 1:4] + luminance[..., None] * kept[..., 5:8]
 
 
 def laid_exposure(kept: torch.Tensor, rows: torch.Tensor | None) -> float:
