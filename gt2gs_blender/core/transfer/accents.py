@@ -32,7 +32,7 @@ BIN = 2.0
 EXTENT = 128.0
 """The table's cells (Lab a, b units) and its half-width: a and b of sRGB colours lie within it."""
 CELLS = round(2 * EXTENT / BIN)
-TONE_FLOOR = 0.02
+DARK_FLOOR = 0.02
 """Colours darker than this luminance count as this when their hue is taken apart from their light and dark."""
 
 
@@ -61,7 +61,7 @@ class ColourShare:
         luminance scales (its raise of the share, times the shade, over the colour's own luminance): the mix keeps
         the luminance the texture alone gives it and takes the accent's hue."""
         raised = self.raised(colours)[:, None]
-        luminance = (colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)).clamp_min(TONE_FLOOR)
+        luminance = (colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)).clamp_min(DARK_FLOOR)
         hue = raised * shade[:, None] * colours / luminance[:, None]
         return self.base + raised, self.base * colours, hue
 
