@@ -153,7 +153,8 @@ def layout_surface(
     config, photo = run.config, run_texture(texture, run.config)
     views = surface_views(bench, config.backend) if views is None else views
     bright = layout_bright(run.work, run.region, config) if shaded else None
-    kept = layout_shading(run.work, run.region, run.frame, config, photo, bright) if shaded else None
+    mix = scene_colour_mix(run.work, run.region, config)
+    kept = layout_shading(run.work, run.region, run.frame, config, photo, mix, bright) if shaded else None
     exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
     lit = None if bright is None else bright_images(run.work, views, bright, config.backend)
     laid = layout_images(
@@ -164,7 +165,7 @@ def layout_surface(
         kept is not None,
         shade_width(run.frame, config),
         config.keep_scene,
-        scene_colour_mix(run.work, run.region, config),
+        mix,
         exposure,
         lit,
     )

@@ -60,10 +60,10 @@ class ColourShare:
         (N, 3) what ``base`` of each colour adds as it is, and (N, 3) the accent's hue, which the texture's
         luminance scales (its raise of the share, times the shade, over the colour's own luminance): the mix keeps
         the luminance the texture alone gives it and takes the accent's hue."""
-        raised = self.raised(colours)[:, None]
+        share = self(colours)[:, None]
         luminance = (colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)).clamp_min(DARK_FLOOR)
-        hue = raised * shade[:, None] * colours / luminance[:, None]
-        return self.base + raised, self.base * colours, hue
+        hue = (share - self.base) * shade[:, None] * colours / luminance[:, None]
+        return share, self.base * colours, hue
 
     def accent(self, colours: np.ndarray) -> np.ndarray:
         """(N,) how much of an accent each of ``colours`` (N, 3 sRGB in 0..1) is: vivid times rare."""

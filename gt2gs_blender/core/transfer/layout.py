@@ -457,17 +457,18 @@ def layout_shading(
     frame: LayoutFrame,
     config: TransferConfig,
     texture: np.ndarray,
+    mix: float | ColourShare,
     bright: torch.Tensor | None = None,
 ) -> torch.Tensor | None:
     """What of the scene a run with ``config`` lays ``texture`` over (:func:`layout_shade`, ``shade_softness``
-    repeats of ``frame``, ``keep_scene``, ``scene_colour``, ``scene_brightness``, the shade against ``bright``,
+    repeats of ``frame``, ``keep_scene``, the colour ``mix`` of :func:`scene_colour_mix`, ``scene_brightness``,
+    the shade against ``bright``,
     :func:`layout_bright`), or None when it keeps the texture's own colours. *Scene Brightness* keeps only
     ``keep_material`` of its exposure (in stops): a part given the texture's brightness is not darkened back."""
     if not keeps_scene(config):
         return None
     width = shade_width(frame, config)
     brightness = config.scene_brightness * config.keep_material
-    mix = scene_colour_mix(scene, rows, config)
     return layout_shade(scene, rows, width, config.keep_scene, mix, texture, brightness, bright)
 
 

@@ -128,7 +128,8 @@ def laid_out_start(plan: RunPlan) -> GaussianScene:
     same children); hidden splats keep their colours, as the run keeps them."""
     config, frame, texture = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
-    shade = layout_shading(work, region, frame, config, texture, layout_bright(work, region, config))
+    mix = scene_colour_mix(work, region, config)
+    shade = layout_shading(work, region, frame, config, texture, mix, layout_bright(work, region, config))
     laid = lay_out(work, region, plan.content, texture, frame, config, shade)
     if config.split_size > 0:
         laid, region = add_detail(laid, laid.base_colors, region, plan.content, texture, frame, config, shade)

@@ -243,9 +243,9 @@ def _prepare(plan: RunPlan) -> Prepared:
     # the scene's own light and shade, as the preview takes it
     laying = frame is not None and config.layout
     bright = layout_bright(work, region, config) if laying else None
-    shade = layout_shading(work, region, frame, config, image, bright) if laying else None
     # what of its own colour each part keeps, taken before the layout recolours the splats
     mix = scene_colour_mix(work, region, config) if laying else config.scene_colour
+    shade = layout_shading(work, region, frame, config, image, mix, bright) if laying else None
     measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
     lit = bright_images(work, plan.used, bright, config.backend) if measured else None
     if config.color_transfer and not laying:  # the layout lays its own colours on every restyled splat
