@@ -80,7 +80,7 @@ from recognise_scenes import (
 )
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
-from gt2gs_blender.core.transfer.metrics import masked_ssim
+from gt2gs_blender.core.transfer.metrics import object_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, sketch
 from gt2gs_blender.core.transfer.plan import RunPlan, run_texture
 
@@ -186,13 +186,13 @@ def sketched(
 
 
 def content_ssim(views: Views, original: Views) -> float:
-    """How much of the scene is still there: luminance SSIM of each view to the original's render of it, over
-    the original's object pixels, mean over the views (1: the original; the structure measures ignore it)."""
-    luma = torch.tensor(measure.LUMA)
+    """How much of the scene is still there: the product's *Scene Kept* (``object_ssim``, luminance SSIM over the
+    original's object pixels) of each view to the original's render of it, mean over the views (1: the original;
+    the structure measures ignore it); NaN when no view covers a window."""
     values = []
     for (rgb, _), (reference, alpha) in zip(views, original, strict=True):
-        a, b = (torch.from_numpy(measure.to_float(x)) @ luma for x in (rgb, reference))
-        values.append(masked_ssim(a[..., None], b[..., None], torch.from_numpy(alpha > measure.MASK_ALPHA)))
+        image, then = (torch.from_numpy(measure.to_float(x))[None] for x in (rgb, reference))
+        values.append(object_ssim(image, then, torch.from_numpy(alpha > measure.MASK_ALPHA)[None]))
     covered = [v for v in values if v is not None]
     return float(np.mean(covered)) if covered else float("nan")
 

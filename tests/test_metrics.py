@@ -167,12 +167,32 @@ def _photo(seed: int, size: int = 64) -> torch.Tensor:
     return torch.from_numpy(np.clip(0.7 * coarse + 0.3 * g.random((size, size, 3)), 0.0, 1.0).astype(np.float32))
 
 
-def test_object_ssim_of_identical_renders_is_one_and_over_the_whole_frame_is_the_papers_ssim():
+def rec709(images: torch.Tensor) -> torch.Tensor:
+    """The Rec. 709 luminance (..., H, W, 1) of (..., H, W, 3) linear colours, written out here."""
+    return (0.2126 * images[..., 0] + 0.7152 * images[..., 1] + 0.0722 * images[..., 2])[..., None]
+
+
+def test_object_ssim_of_identical_renders_is_one_and_over_the_whole_frame_is_the_ssim_of_luminance():
     a, b = _photo(0)[None], _photo(1)[None]
     everywhere = torch.ones(1, 64, 64, dtype=torch.bool)
     assert metrics.object_ssim(a, a, everywhere) == pytest.approx(1.0, abs=1e-6)
-    assert metrics.object_ssim(a, b, everywhere) == pytest.approx(paper_ssim(a, b), abs=1e-6)
+    assert metrics.object_ssim(a, b, everywhere) == pytest.approx(paper_ssim(rec709(a), rec709(b)), abs=1e-6)
     assert metrics.object_ssim(a, b, torch.zeros(1, 64, 64, dtype=torch.bool)) is None
+
+
+def test_a_new_colour_of_the_same_light_and_dark_keeps_the_scene_and_a_new_light_does_not():
+    """Scene Kept judges the scene's light and dark, not the colour the texture gives it: the original's
+    luminance in another hue scores 1, where the paper's colour-channel SSIM drops; the same hue with its light
+    and dark changed scores low."""
+    original = _photo(12)[None]
+    y = rec709(original)
+    tint = torch.tensor([1.2, 0.9, 1.1])
+    recoloured = y * tint / float(rec709(tint[None, None]).squeeze())  # another hue, the same luminance
+    relit = original * rec709(_photo(13)[None]) * 2.0
+    everywhere = torch.ones(1, 64, 64, dtype=torch.bool)
+    assert metrics.object_ssim(recoloured, original, everywhere) == pytest.approx(1.0, abs=1e-5)
+    assert paper_ssim(recoloured, original) < 0.9
+    assert metrics.object_ssim(relit, original, everywhere) < 0.75
 
 
 def test_object_ssim_counts_only_the_objects_pixels():
@@ -197,7 +217,7 @@ def test_the_blurred_object_ssim_is_the_ssim_of_opencv_blurred_renders():
     blur = lambda x: torch.from_numpy(
         cv2.GaussianBlur(x.double().numpy(), (side, side), sigma, borderType=cv2.BORDER_REFLECT_101)
     ).float()
-    expected = paper_ssim(blur(a)[None], blur(b)[None])
+    expected = paper_ssim(rec709(blur(a))[None], rec709(blur(b))[None])
     assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) == pytest.approx(expected, abs=1e-5)
     assert metrics.object_ssim(a[None], b[None], covered[None], blurred=True) > metrics.object_ssim(
         a[None], b[None], covered[None]
@@ -219,7 +239,7 @@ def test_the_blur_is_opencv_s_gaussian_blur_at_every_sigma(sigma):
 
 
 def test_content_metrics_are_the_paper_s_ssim_and_the_object_s():
-    """One map per view serves both: the whole frame is the paper's SSIM, the object's pixels object_ssim."""
+    """The whole frame is the paper's SSIM (over the colour channels), the object's pixels object_ssim."""
     a, b = torch.stack([_photo(8), _photo(9)]), torch.stack([_photo(10), _photo(11)])
     covered = torch.zeros(2, 64, 64, dtype=torch.bool)
     covered[:, 10:50, 20:40] = True

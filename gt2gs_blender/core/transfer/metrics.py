@@ -3,10 +3,12 @@ measures on every other view (``MEASURE_STRIDE``) at one size, ``MEASURE_SIDE``,
 
 - ``ssim``: the paper's content preservation, SSIM of each stylised render vs the original render over the
   whole frame, mean over views (a small object on a plain backdrop scores high whatever happens to it).
-- ``object_ssim``: content a user can trust, the same SSIM over the windows centred on the pixels the original
-  covers (the object's pixels; for a capture that fills the view, the frame); ``object_ssim_blurred`` the same
-  after blurring both renders to the object's scale (``OBJECT_BLUR``): whether the object's parts, light and
-  dark still lie where they did once the texture's own detail is set aside. Neither enters the optimisation.
+- ``object_ssim``: content a user can trust, SSIM of the luminance (``LUMA``) over the windows centred on the pixels
+  the original covers (the object's pixels; for a capture that fills the view, the frame): whether the scene's edges,
+  light and dark are still there, whatever colour the texture gave them (the texture's colour is what a run is
+  for); ``object_ssim_blurred`` the same after blurring both renders to the object's scale (``OBJECT_BLUR``):
+  whether the object's parts, light and dark still lie where they did once the texture's own detail is set aside.
+  ``bench/recognise.py``'s content is the same measure on held-out views. Neither enters the optimisation.
 - ``st_*`` / ``lt_*``: multi-view consistency, short range (view i vs i+1) and long range (i vs i+7):
   render i is warped into view j by rendered depth and the known poses (exact for our scenes, where
   peers estimate optical flow), then compared with render j over valid pixels only (covered in
@@ -62,18 +64,12 @@ BLOCK_BYTES = 64 * 2**20
 def content_metrics(
     stylised: torch.Tensor, original: torch.Tensor, covered: torch.Tensor | None = None
 ) -> dict[str, float | None]:
-    """``{ssim}`` of stylised renders (V,H,W,3) against the original's, and ``object_ssim`` /
-    ``object_ssim_blurred`` over the ``covered`` (V,H,W) pixels of the original when given: one SSIM map per view
-    serves the whole frame and the object's pixels."""
-    frame, kept = [], []
-    for v, (image, reference) in enumerate(zip(stylised, original)):
-        per_window = ssim_map(image, reference)[0].mean(0)
-        frame.append(float(per_window.mean()))
-        if covered is not None:
-            kept.append(covered_mean(per_window, covered[v]))
-    out: dict[str, float | None] = {"ssim": _mean(frame)}
+    """``{ssim}`` (the paper's, over the colour channels) of stylised renders (V,H,W,3) against the original's, and
+    ``object_ssim`` / ``object_ssim_blurred`` (:func:`object_ssim`) over the ``covered`` (V,H,W) pixels of the
+    original when given."""
+    out: dict[str, float | None] = {"ssim": _mean([float(ssim_map(a, b).mean()) for a, b in zip(stylised, original)])}
     if covered is not None:
-        out["object_ssim"] = _mean([k for k in kept if k is not None])
+        out["object_ssim"] = object_ssim(stylised, original, covered)
         out["object_ssim_blurred"] = object_ssim(stylised, original, covered, blurred=True)
     return out
 
@@ -82,11 +78,11 @@ def content_metrics(
 def object_ssim(
     stylised: torch.Tensor, original: torch.Tensor, covered: torch.Tensor, *, blurred: bool = False
 ) -> float | None:
-    """Mean over views of SSIM(stylised, original) (V, H, W, 3) over the windows centred on the ``covered``
-    (V, H, W) pixels, each view's pair first blurred to the object's scale when ``blurred``; None when no view
-    covers a window."""
+    """Mean over views of the luminance SSIM of stylised and original renders (V, H, W, 3) over the windows centred
+    on the ``covered`` (V, H, W) pixels, each view's pair first blurred to the object's scale when ``blurred``; None
+    when no view covers a window."""
     scores = []
-    for image, reference, mask in zip(stylised, original, covered):
+    for image, reference, mask in zip(luminance(stylised), luminance(original), covered):
         if blurred and bool(mask.any()):
             sigma = OBJECT_BLUR * float(mask.sum()) ** 0.5
             image, reference = gaussian_blur(torch.stack([image, reference]), sigma)
@@ -94,6 +90,12 @@ def object_ssim(
         if score is not None:
             scores.append(score)
     return _mean(scores)
+
+
+def luminance(images: torch.Tensor) -> torch.Tensor:
+    """The luminance (..., H, W, 1) of (..., H, W, 3) linear-weighted colours (``LUMA``), the channel content is
+    judged on."""
+    return (images @ torch.tensor(LUMA, dtype=images.dtype, device=images.device))[..., None]
 
 
 def gaussian_blur(images: torch.Tensor, sigma: float) -> torch.Tensor:
@@ -130,21 +132,15 @@ def preview_ssim(
     """SSIM of the luminance of ``result`` rendered from ``camera`` and ``preview`` (H, W, 3 uint8 of that
     view at the camera's size) over the pixels the result covers; None when it covers none."""
     out = render(result.detach(), [camera], background=background, backend=backend)
-    luma = torch.tensor(LUMA, dtype=out.colors.dtype, device=out.colors.device)
-    image = out.colors[0].clamp(0.0, 1.0) @ luma
-    shown = torch.from_numpy(np.ascontiguousarray(preview)).to(out.colors) / 255.0 @ luma
-    return masked_ssim(image[..., None], shown[..., None], out.alphas[0] > COVERED)
+    shown = torch.from_numpy(np.ascontiguousarray(preview)).to(out.colors) / 255.0
+    return masked_ssim(luminance(out.colors[0].clamp(0.0, 1.0)), luminance(shown), out.alphas[0] > COVERED)
 
 
 @torch.no_grad()
 def masked_ssim(image: torch.Tensor, reference: torch.Tensor, covered: torch.Tensor) -> float | None:
     """Mean SSIM of two (H, W, C) images over the windows centred on ``covered`` (H, W) pixels: an object's
     likeness without the background around it; None when no window is centred on a covered pixel."""
-    return covered_mean(ssim_map(image, reference)[0].mean(0), covered)
-
-
-def covered_mean(per_window: torch.Tensor, covered: torch.Tensor) -> float | None:
-    """Mean of an SSIM map (H-10, W-10) over the windows centred on ``covered`` (H, W) pixels; None when none is."""
+    per_window = ssim_map(image, reference)[0].mean(0)  # (H-10, W-10): the windows inside the image
     half = WINDOW // 2
     inside = covered[half:-half, half:-half].to(per_window.device)
     return float(per_window[inside].mean()) if bool(inside.any()) else None
