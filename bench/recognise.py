@@ -43,8 +43,10 @@ instead of transferring when the settings match (and ``--reuse-older`` also when
 some of today's settings, listed in the row).
 
 Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
-(rows: textures; columns: texture | projected | layout start | original | each result's held-out views). The
-target the engine must meet: top 3 under both measures for at least 5 of the 6 textures on each scene.
+(rows: textures; columns: texture | projected | layout start | original | each result's held-out views), and every
+held-out view of the original, the layout starts and the results as PNGs under bench/out/recognise/<tag>/<scene>/
+(bench/quality_figure.py draws docs/quality.md's picture from them). The target the engine must meet: top 3 under
+both measures for at least 5 of the 6 textures on each scene.
 """
 
 from __future__ import annotations
@@ -286,21 +288,21 @@ def row(scene: str, texture: str, variant: str, dist: dict[str, Any], seconds: f
 # ---------------------------------------------------------------------------------------------------
 # Contact sheet
 # ---------------------------------------------------------------------------------------------------
-def tile(image: np.ndarray, label: str = "") -> np.ndarray:
-    """RGB uint8 image fitted into a TILE square (grey margins), with a label."""
+def tile(image: np.ndarray, label: str = "", size: int = TILE) -> np.ndarray:
+    """RGB uint8 image fitted into a ``size`` square (grey margins), with a label."""
     image = np.asarray(image)
     if image.dtype != np.uint8:
         image = (np.clip(image, 0, 1) * 255 + 0.5).astype(np.uint8)
-    scale = TILE / max(image.shape[:2])
+    scale = size / max(image.shape[:2])
     small = cv2.resize(
         image, (round(image.shape[1] * scale), round(image.shape[0] * scale)), interpolation=cv2.INTER_AREA
     )
-    out = np.full((TILE, TILE, 3), 96, np.uint8)
-    y, x = (TILE - small.shape[0]) // 2, (TILE - small.shape[1]) // 2
+    out = np.full((size, size, 3), 96, np.uint8)
+    y, x = (size - small.shape[0]) // 2, (size - small.shape[1]) // 2
     out[y : y + small.shape[0], x : x + small.shape[1]] = small
     if label:
-        cv2.rectangle(out, (0, TILE - 16), (TILE, TILE), (0, 0, 0), -1)
-        cv2.putText(out, label, (3, TILE - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.rectangle(out, (0, size - 16), (size, size), (0, 0, 0), -1)
+        cv2.putText(out, label, (3, size - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.36, (255, 255, 255), 1, cv2.LINE_AA)
     return out
 
 
@@ -309,6 +311,13 @@ def write_sheet(path: Path, sheet: dict[str, list[np.ndarray]]) -> None:
     rows = [np.hstack(r + [np.full((TILE, TILE, 3), 64, np.uint8)] * (width - len(r))) for r in sheet.values()]
     path.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(path), cv2.cvtColor(np.vstack(rows), cv2.COLOR_RGB2BGR))
+
+
+def write_pictures(folder: Path, name: str, views: Views) -> None:
+    """Each held-out view as ``<folder>/<name>-v<k>.png`` (bench/quality_figure.py draws from them)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for k, (rgb, _) in enumerate(views):
+        cv2.imwrite(str(folder / f"{name}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
 
 
 def output_name(args: argparse.Namespace) -> str:
@@ -346,6 +355,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     surfaces = {p: surface_views(bench, r.config.backend) for p, r in starts.items() if r.config.layout}
     folder = OUT / args.tag / name  # the results, whatever size measures them
     pictures = OUT / output_name(args) / name
+    write_pictures(pictures, "original", original_views)
     for texture in args.textures:
         image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
         sheet[texture] = [tile(image, texture)]
@@ -377,9 +387,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             p.update(scene_side(views, original_views))
             rows.append(p)
             sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
-            pictures.mkdir(parents=True, exist_ok=True)
-            for k, (rgb, _) in enumerate(views):
-                cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+            write_pictures(pictures, f"{texture}-{variant}", views)
             for kind, shaded in (("target", True), ("surface", False)):
                 views = layout_surface(run, bench, texture_path(texture), shaded, surfaces[preset_name])
                 p = row(name, texture, variant.removesuffix("-start") + f"-{kind}", score(view_stats(views), stats))
@@ -448,9 +456,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
                 )
                 for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
                     sheet[texture].append(tile(rgb, ranks_label(t, f"{variant} v{k}") if k == 0 else f"{variant} v{k}"))
-                pictures.mkdir(parents=True, exist_ok=True)
-                for k, (rgb, _) in enumerate(views):
-                    cv2.imwrite(str(pictures / f"{texture}-{variant}-v{k}.png"), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+                write_pictures(pictures, f"{texture}-{variant}", views)
     write_sheet(OUT / f"{output_name(args)}-{name}.png", sheet)
     return rows, {
         "held_out": [c.name for c in bench.held_out],
