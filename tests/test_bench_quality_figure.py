@@ -45,5 +45,5 @@ def test_each_result_is_a_strip_of_texture_original_preview_and_result_from_one_
     assert strip.shape == (SIDE, 4 * SIDE, 3)
     middle = SIDE // 2
     assert [int(strip[middle, k * SIDE + middle, 0]) for k in (1, 2, 3)] == list(colours.values())
-    with pytest.raises(SystemExit, match="original-v0.png: no such picture"):
+    with pytest.raises(SystemExit, match=r"original-v0\.png: no such picture"):
         figure_rows(report, "fast-s0", 0, tmp_path)
