@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from ..scene.parts import srgb_to_lab
-from .losses import LUMA
+from .losses import luma
 
 VIVID = (10.0, 25.0)
 """Lab chroma: no accent at or below the first (greys, browns, pastels), fully vivid from the second."""
@@ -61,7 +61,7 @@ class ColourShare:
         luminance scales (its raise of the share, times the shade, over the colour's own luminance): the mix keeps
         the luminance the texture alone gives it and takes the accent's hue."""
         share = self(colours)[:, None]
-        luminance = (colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)).clamp_min(DARK_FLOOR)
+        luminance = luma(colours).clamp_min(DARK_FLOOR)
         hue = (share - self.base) * shade[:, None] * colours / luminance[:, None]
         return share, self.base * colours, hue
 

@@ -57,7 +57,7 @@ from .accents import ColourShare, colour_share
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .grain import periodic_blur
-from .losses import LUMA
+from .losses import luma
 from .setting import Projection
 from .shade import (
     bright_end,
@@ -328,7 +328,7 @@ def layout_images(
             if softness > 0:  # the same average as the splats' shade
                 seen = torch.stack([spatial_blur(points, seen[:, c], weight, softness) for c in range(3)], dim=1)
             full = None if lit is None else lit.cpu()[covered].float()
-            kept = kept_scene(shading(seen @ torch.tensor(LUMA), keep=keep, bright=full), seen, colour, exposure)
+            kept = kept_scene(shading(luma(seen), keep=keep, bright=full), seen, colour, exposure)
             colours = under_scene(colours, kept)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
@@ -491,7 +491,7 @@ def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: Trans
     if config.keep_material >= 1.0 or not keeps_scene(config):
         return None
     colours = scene.base_colors.detach().clamp(0.0, 1.0)
-    luminance = colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+    luminance = luma(colours)
     labels = torch.from_numpy(find_parts(scene).labels).to(luminance.device)
     part = torch.ones_like(labels, dtype=torch.bool) if rows is None else rows.to(labels.device)
     bright = torch.full_like(luminance, bright_end(luminance[part]))

@@ -15,6 +15,12 @@ LUMA = (0.2126, 0.7152, 0.0722)
 """Rec. 709 luminance weights: light and dark apart from hue (the layout loss, the preview's shading,
 ``preview_ssim``)."""
 
+
+def luma(colours: torch.Tensor) -> torch.Tensor:
+    """The luminance (...) of ``colours`` (..., 3) by ``LUMA``: the one conversion every light-and-dark rule uses."""
+    return colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+
+
 COSINE_EPS = 1e-8
 """Norm floor when normalising feature vectors (a zero vector has cosine 0 with everything)."""
 
@@ -79,18 +85,15 @@ def layout_loss(image: torch.Tensor, layout: torch.Tensor, scene: torch.Tensor) 
     if not bool(covered.any()):
         return image.sum() * 0.0
     result, texture, original = image[covered], layout[..., :3][covered], scene[covered]
-    weights = torch.tensor(LUMA, dtype=image.dtype, device=image.device)
-    luma = (result - texture) @ weights
     return (
-        luma.abs()
-        + HUE_WEIGHT * _off_path(_chroma(result, weights), _chroma(texture, weights), _chroma(original, weights))
+        luma(result - texture).abs() + HUE_WEIGHT * _off_path(_chroma(result), _chroma(texture), _chroma(original))
     ).mean()
 
 
-def _chroma(rgb: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+def _chroma(rgb: torch.Tensor) -> torch.Tensor:
     """(N, 2) colour differences R - Y and B - Y of (N, 3) RGB: its hue and saturation apart from its light."""
-    luma = rgb @ weights
-    return torch.stack([rgb[:, 0] - luma, rgb[:, 2] - luma], -1)
+    y = luma(rgb)
+    return torch.stack([rgb[:, 0] - y, rgb[:, 2] - y], -1)
 
 
 def _off_path(point: torch.Tensor, start: torch.Tensor, end: torch.Tensor) -> torch.Tensor:

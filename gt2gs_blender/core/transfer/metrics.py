@@ -39,7 +39,7 @@ from ..features.window import selected_features
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..train.ssim import WINDOW, gaussian_window, ssim_map
-from .losses import LUMA, cosine_distance, nearest_features
+from .losses import cosine_distance, luma, nearest_features
 from .texture_bank import covered_cells
 
 SHORT_RANGE = 1
@@ -93,9 +93,8 @@ def object_ssim(
 
 
 def luminance(images: torch.Tensor) -> torch.Tensor:
-    """The luminance (..., H, W, 1) of (..., H, W, 3) linear-weighted colours (``LUMA``), the channel content is
-    judged on."""
-    return (images @ torch.tensor(LUMA, dtype=images.dtype, device=images.device))[..., None]
+    """The luminance (..., H, W, 1) of (..., H, W, 3) images as one channel: what content is judged on."""
+    return luma(images)[..., None]
 
 
 def gaussian_blur(images: torch.Tensor, sigma: float) -> torch.Tensor:

@@ -30,7 +30,7 @@ from .accents import ColourShare
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
 from .layout import lay_out, layout_bright, layout_shading, scene_colour_mix
-from .losses import LUMA
+from .losses import luma
 from .plan import RunPlan, plan_run
 from .region import assemble
 from .shade import kept_scene, shading, under_scene
@@ -87,7 +87,7 @@ def orientation_preview(
     covered = groups >= 0
 
     seen = torch.from_numpy(premultiplied / np.maximum(alpha, MIN_ALPHA)[..., None]).clamp(0.0, 1.0)
-    luminance = seen @ torch.tensor(LUMA)
+    luminance = luma(seen)
     kept = kept_scene(
         shading(luminance, luminance[torch.from_numpy(covered)], keep).reshape(-1), seen.reshape(-1, 3), colour
     )

@@ -34,7 +34,7 @@ import torch.nn.functional as F
 
 from ..scene.gaussians import GaussianScene
 from .accents import ColourShare
-from .losses import LUMA
+from .losses import luma
 
 ROW = 8
 """A splat's kept-scene row: the texture's gain, the colour added (3), the exposure, the accent's hue (3)."""
@@ -90,7 +90,7 @@ def layout_shade(
     if softness > 0:
         points, weights = scene.means.detach()[part], scene.opacities.detach()[part]
         seen = torch.stack([spatial_blur(points, seen[:, c], weights, softness) for c in range(3)], dim=1)
-    luminance = seen @ torch.tensor(LUMA, dtype=seen.dtype, device=seen.device)
+    luminance = luma(seen)
     lit_at = None if bright is None else bright[part].to(luminance)
     mixed = kept_scene(shading(luminance, keep=keep, bright=lit_at), seen, colour)
     if texture is not None and brightness > 0:
@@ -128,7 +128,7 @@ def brightness_exposure(
     small = cv2.resize(np.asarray(texture[..., :3], np.float32), side, interpolation=cv2.INTER_AREA)
     texels = torch.from_numpy(small.reshape(-1, 3))
     mixed = mix(texels[None], rows[:, None]).clamp(0.0, 1.0)  # (splats, texels, 3)
-    return exposure_for(mixed @ torch.tensor(LUMA), target, w)
+    return exposure_for(luma(mixed), target, w)
 
 
 def exposure_for(luminance: torch.Tensor, target: float, weights: torch.Tensor | None = None) -> float:
@@ -152,7 +152,7 @@ def exposed(colours: torch.Tensor, exposure: torch.Tensor | float) -> torch.Tens
     leaves 0..1, the order of light and dark is kept, and 1 leaves the colours as they are."""
     exposure = torch.as_tensor(exposure, dtype=colours.dtype, device=colours.device)
     inside = colours.clamp(0.0, 1.0)
-    luminance = inside @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
+    luminance = luma(inside)
     wanted = exposed_luminance(luminance, exposure.squeeze(-1).clamp_min(1.0))
     return torch.where(exposure <= 1.0, colours * exposure, lit(inside, luminance, wanted))
 
@@ -168,10 +168,10 @@ def exposed_luminance(luminance: torch.Tensor, exposure: torch.Tensor | float) -
 def lit(colours: torch.Tensor, luminance: torch.Tensor, wanted: torch.Tensor) -> torch.Tensor:
     """``colours`` (..., 3 in 0..1, of ``luminance``) brought to the higher luminance ``wanted``: scaled (hue and
     saturation kept) as far as the brightest channel allows, then mixed toward white for the rest."""
-    luma = torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
     scaled = colours * (wanted / luminance.clamp_min(1e-12))[..., None]
     fitted = scaled / scaled.amax(dim=-1, keepdim=True).clamp_min(1.0)
-    short = ((wanted - fitted @ luma) / (1.0 - fitted @ luma).clamp_min(1e-12)).clamp(0.0, 1.0)
+    y = luma(fitted)
+    short = ((wanted - y) / (1.0 - y).clamp_min(1e-12)).clamp(0.0, 1.0)
     return fitted + short[..., None] * (1.0 - fitted)
 
 
@@ -206,7 +206,7 @@ def mix(texture: torch.Tensor, kept: torch.Tensor) -> torch.Tensor:
     """(..., 3) ``texture`` colours (..., 3) mixed with the scene ``kept`` (..., ``ROW``, broadcast against them)
     before the exposure: the shaded texture, the mixed-in share of the scene's own colour and an accent's hue at
     the texture's luminance."""
-    luminance = texture @ torch.tensor(LUMA, dtype=texture.dtype, device=texture.device)
+    luminance = luma(texture)
     return texture * kept[..., :1] + kept[..., 1:4] + luminance[..., None] * kept[..., 5:8]
 
 
