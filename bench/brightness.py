@@ -27,7 +27,7 @@ from recognise import texture_path
 from recognise_scenes import SCENES, load_bench_scene
 
 from gt2gs_blender.core.api import GaussianScene, read_scene, render
-from gt2gs_blender.core.transfer.losses import LUMA
+from gt2gs_blender.core.transfer.losses import luma
 from gt2gs_blender.core.transfer.texture import load_texture
 
 OUT = ROOT / "bench" / "out" / "brightness"
@@ -40,12 +40,11 @@ TEXTURES = ("woven_straw", "honeycomb", "toy_bricks")
 @torch.no_grad()
 def mean_luminance(scene: GaussianScene, cameras: list, covered: list[torch.Tensor]) -> float:
     """The mean luminance of ``scene``'s colour (alpha divided out) over the ``covered`` pixels of each camera."""
-    luma = torch.tensor(LUMA)
     values = []
     for camera, mask in zip(cameras, covered):
         out = render(scene, [camera], render_depth=False)
         colour = out.colors[0][..., :3][mask] / out.alphas[0][mask].clamp_min(1e-6)[:, None]
-        values.append(colour.clamp(0.0, 1.0) @ luma)
+        values.append(luma(colour.clamp(0.0, 1.0)))
     return float(torch.cat(values).mean())
 
 
@@ -65,7 +64,7 @@ def main() -> None:
     print(f"{args.scene}: original {original:.3f}")
     print(f"{'texture':17s} {'photo':>6s} " + " ".join(f"{tag:>18s}" for tag in args.tags))
     for texture in args.textures:
-        photo = float((np.asarray(load_texture(texture_path(texture)))[..., :3] @ np.asarray(LUMA)).mean())
+        photo = float(luma(torch.from_numpy(np.asarray(load_texture(texture_path(texture)))[..., :3])).mean())
         row = {"photo": photo}
         for tag in args.tags:
             saved = RESULTS / tag / args.scene / f"{texture}-{args.preset}-s{args.seed}.ply"
