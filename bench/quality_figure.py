@@ -28,7 +28,7 @@ from recognise import OUT, TOP, texture_path, tile
 from recognise_scenes import CAPTURES
 
 FIGURE = ROOT / "docs" / "quality_sheet.jpg"
-QUALITY = 88
+QUALITY = 80
 SIDE = 240
 """Each cell's side in pixels (a credit line fits under it)."""
 
