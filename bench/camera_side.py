@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -49,7 +50,9 @@ def sample(scene: GaussianScene, count: int) -> tuple[torch.Tensor, torch.Tensor
     return centres[pick], log_size[pick]
 
 
-def viewpoint(centres: torch.Tensor, log_size: torch.Tensor, middle: torch.Tensor, extent: float) -> tuple:
+def viewpoint(
+    centres: torch.Tensor, log_size: torch.Tensor, middle: torch.Tensor, extent: float
+) -> tuple[torch.Tensor, float]:
     """The point (3,) whose distance best explains the sizes, and the fit's loss."""
 
     def loss(p: torch.Tensor) -> torch.Tensor:
@@ -64,7 +67,7 @@ def viewpoint(centres: torch.Tensor, log_size: torch.Tensor, middle: torch.Tenso
     return point[:3], value
 
 
-def minimised(loss, start: torch.Tensor) -> tuple[torch.Tensor, float]:
+def minimised(loss: Callable[[torch.Tensor], torch.Tensor], start: torch.Tensor) -> tuple[torch.Tensor, float]:
     """``loss``'s minimum from ``start`` by L-BFGS: the parameters and the loss there."""
     p = start.clone().requires_grad_(True)
     optimiser = torch.optim.LBFGS([p], max_iter=300, line_search_fn="strong_wolfe")
