@@ -3,10 +3,10 @@ measures on every other view (``MEASURE_STRIDE``) at one size, ``MEASURE_SIDE``,
 
 - ``ssim``: the paper's content preservation, SSIM of each stylised render vs the original render over the
   whole frame, mean over views (a small object on a plain backdrop scores high whatever happens to it).
-- ``object_ssim``: content a user can trust, SSIM of the luminance (``losses.luma``) over the windows centred on the pixels
-  the original covers (the object's pixels; for a capture that fills the view, the frame): whether the scene's edges,
-  light and dark are still there, whatever colour the texture gave them (the texture's colour is what a run is
-  for); ``object_ssim_blurred`` the same after blurring both renders to the object's scale (``OBJECT_BLUR``):
+- ``object_ssim``: content a user can trust, SSIM of the luminance (``losses.luma``) over the windows centred on
+  the pixels the original covers (the object's pixels; for a capture that fills the view, the frame): whether the
+  scene's edges, light and dark are still there, whatever colour the texture gave them (the texture's colour is what
+  a run is for); ``object_ssim_blurred`` the same after blurring both renders to the object's scale (``OBJECT_BLUR``):
   whether the object's parts, light and dark still lie where they did once the texture's own detail is set aside.
   ``bench/recognise.py``'s content is the same measure on held-out views. Neither enters the optimisation.
 - ``st_*`` / ``lt_*``: multi-view consistency, short range (view i vs i+1) and long range (i vs i+7):
