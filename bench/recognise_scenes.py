@@ -59,7 +59,8 @@ the held-out views are from a ring at 40 degrees as the donut's, the four that s
 CAPTURE_UP = "-y"
 CAPTURE_SCALE = 2
 """The captures' held-out views are this many times the bench size: a guitar fills a fifth of a square view."""
-SCENES = ("donut", "fern", *CAPTURES)
+SCENES = ("donut", "fern", "fern_alone", *CAPTURES)
+"""``fern_alone``: the fern given without its cameras (the run's automatic views), judged from its LLFF test poses."""
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gt2gs_blender" / "bench"
 FERN_FIT = {"iterations": 1500, "downscale": 8, "points": DEFAULT_POINTS, "sh_degree": DEFAULT_SH_DEGREE, "seed": 0}
 """The fern's fit settings, shared by bench/recognise.py and bench/ablation.py (1,500 steps: ~7 min, once)."""
@@ -107,10 +108,10 @@ def load_bench_scene(name: str, resolution: int = 256) -> BenchScene:
         ring = auto_views(scene, HELD_OUT_RING, width=size, height=size, elevation_deg=HELD_OUT_ELEVATION, up=up)
         held_out = [ring[i] for i in (HELD_OUT_DONUT if name == "donut" else broadest(scene, ring))]
         return BenchScene(name, scene, None, held_out, (1.0, 1.0, 1.0))
-    if name == "fern":
+    if name in ("fern", "fern_alone"):
         folder = fern_fit_dir()
         cameras = load_views(folder / "cameras.json")
-        train = [c for i, c in enumerate(cameras) if i % LLFF_HOLDOUT]
+        train = [c for i, c in enumerate(cameras) if i % LLFF_HOLDOUT] if name == "fern" else None
         test = [c.scaled(resolution / max(c.width, c.height)) for i, c in enumerate(cameras) if not i % LLFF_HOLDOUT]
         return BenchScene(name, read_scene(folder / "point_cloud.ply"), train, test, (0.0, 0.0, 0.0))
     raise ValueError(f"unknown scene {name!r}; choose one of {', '.join(SCENES)}")

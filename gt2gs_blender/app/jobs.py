@@ -129,12 +129,16 @@ def summary(report: dict) -> str:
     return "\n".join(lines)
 
 
-def strip_cameras(original: GaussianScene, views: Sequence[Camera] | int | None, up: str) -> list[Camera]:
+def strip_cameras(
+    original: GaussianScene, views: Sequence[Camera] | int | None, up: str, kind: str = "orbit"
+) -> list[Camera]:
     """The before/after strip's views, longest side ``STRIP_SIZE``: four of the run's own cameras, spread over them,
-    when it was given cameras (a capture seen as it was taken); else a ring around the ``up`` axis cut to the object
-    and enlarged to fill its cells (a wide donut shows larger)."""
+    when it was given cameras (a capture seen as it was taken); else automatic views of the run's ``kind`` (a ring,
+    or the front arc) about the ``up`` axis cut to the object and enlarged to fill its cells (a wide donut shows
+    larger)."""
     if views is None or isinstance(views, int):
-        ring = auto_views(original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, elevation_deg=30.0, up=up)
+        size = dict(width=STRIP_SIZE, height=STRIP_SIZE)
+        ring = auto_views(original, STRIP_VIEWS, **size, kind=kind, elevation_deg=30.0, up=up)
         picked = cut_to_scene(ring, original)
     else:
         cameras = list(views)
@@ -150,9 +154,10 @@ def write_before_after(
     texture: np.ndarray,
     views: Sequence[Camera] | int | None = None,
     up: str = "+z",
+    kind: str = "orbit",
 ) -> None:
     """A PNG: the texture, then the original (top) and stylised (bottom) scene from the strip's views."""
-    cams = strip_cameras(original, views, up)
+    cams = strip_cameras(original, views, up, kind)
     tiles = [torch.cat([_strip_cell(s, cam) for cam in cams], dim=1) for s in (original, stylised)]
     swatch = torch.from_numpy(cv2.resize(texture, (STRIP_SIZE, STRIP_SIZE), interpolation=cv2.INTER_AREA))
     white = torch.ones_like(swatch)

@@ -42,6 +42,11 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
         "-x": "-X is up",
         "auto": "Estimated from the splats",
     },
+    "view_kind": {
+        "orbit": "A ring all round the object (an object seen from all sides)",
+        "front": "A short arc on the side the capture was taken from, read from its splats' sizes (a capture seen "
+        "from the front, given without its cameras)",
+    },
     "layout_projection": {
         "auto": f"View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",
         "box": "Wraps the texture around an object seen from all sides",

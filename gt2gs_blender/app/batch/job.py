@@ -94,7 +94,7 @@ def _run(
         )
         report = {**result.report, "batch": {**batch, "job": job.name, "settings_hash": key, "where": job.where}}
         atomic_write(files.report, json.dumps(report, indent=1, default=str))
-        write_before_after(files.strip, scene, result.scene, texture, views, config.up)
+        write_before_after(files.strip, scene, result.scene, texture, views, config.up, config.view_kind)
 
 
 def one_line(exc: BaseException) -> str:

@@ -74,7 +74,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
     with all_or_nothing(files, new_folders=[args.out]):
         with TerminalProgress("demo") as bar:
             result = run_transfer(scene, image, None, config, stylised, report=report, progress=bar, scene_name=source)
-        write_before_after(strip, scene, result.scene, image, None, config.up)
+        write_before_after(strip, scene, result.scene, image, None, config.up, config.view_kind)
     print(summary(result.report))
     print(f"wrote {stylised}, {strip} and {report}")
 

@@ -65,9 +65,10 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument("--scale", type=positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
     p.add_argument(
         "--kind",
-        choices=("orbit", "arc"),
+        choices=("orbit", "arc", "front"),
         default="orbit",
-        help="generated views: a full ring or a 60° forward-facing arc (default: orbit)",
+        help="generated views: a full ring, a 60° forward-facing arc on -y, or a 30° arc on the side the capture "
+        "was taken from, read from its splats' sizes (default: orbit)",
     )
     p.add_argument(
         "--up",

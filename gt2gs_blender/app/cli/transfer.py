@@ -148,7 +148,8 @@ def _transfer(args: argparse.Namespace) -> dict:
             views_name=_views_source(args),
         )
     if args.strip is not None:
-        write_before_after(args.strip, run.scene, result.scene, run.texture, run.views, run.config.up)
+        config = run.config
+        write_before_after(args.strip, run.scene, result.scene, run.texture, run.views, config.up, config.view_kind)
     return result.report
 
 

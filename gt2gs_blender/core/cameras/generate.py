@@ -7,12 +7,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..scene.gaussians import GaussianScene
 from .axes import axis_vector, snapped
 from .camera import Camera
+from .viewpoint import fitted_viewpoint
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -277,6 +279,54 @@ def scene_up(scene: GaussianScene, quantile: float = 0.98) -> np.ndarray:
     return estimate_up_axis(means[np.all((means >= lo) & (means <= hi), axis=1)])
 
 
+VIEW_KINDS = ("auto", "orbit", "arc", "front")
+"""What :func:`auto_views` draws: a ring all round, an arc on Blender's front, an arc where the cameras stood."""
+LEVEL_DEG = 45.0
+"""Front views keep the asked up unless the cameras looked within this angle of it (a capture lying flat: the
+thinnest axis of a plant before its wall is the depth the cameras looked along)."""
+STEEPEST_DEG = 60.0
+"""The front arc stands at most this far above or below the middle (the arc turns about up; steeper, its views
+crowd together)."""
+FRONT_ARC_DEG = 30.0
+"""The front arc's width: a capture seen from the front was walked along a short path."""
+FRONT_CORE = 0.1
+"""Front views frame the splats' middle between these quantiles across the look (10-90 %): a front capture's rim
+holds large splats few cameras saw, far wider than any photo of it (the fern's 2-98 % framed from 2.3 times its
+cameras' distance, its 10-90 % from 0.9 times)."""
+
+
+@dataclass(frozen=True)
+class FrontArc:
+    """Where front views stand: ``up``, the ``front`` they look from, its ``elevation_deg`` and the ``corners``
+    (8, 3) of the splats' middle across the look, flat through the scene's middle, which the views frame."""
+
+    up: np.ndarray
+    front: np.ndarray
+    elevation_deg: float
+    corners: np.ndarray
+
+
+def front_arc(scene: GaussianScene, up: Sequence[float], fallback: Sequence[float], center: np.ndarray) -> FrontArc:
+    """The arc on the side the capture's cameras stood (:func:`fitted_viewpoint`; ``fallback`` as front when the
+    splats do not say): ``up`` unless the cameras looked within ``LEVEL_DEG`` of it, then the first of a trainer's
+    -Y and Blender's +Z (then +X) across the look."""
+    viewpoint = fitted_viewpoint(scene)
+    toward = _unit(fallback, "front") if viewpoint is None else viewpoint.direction
+    up_v = _unit(up, "up")
+    if abs(float(up_v @ toward)) > math.cos(math.radians(LEVEL_DEG)):
+        across = [np.array(CONVENTION[axis]) for axis in (1, 2, 0)]
+        up_v = next(a for a in across if abs(float(a @ toward)) <= math.cos(math.radians(LEVEL_DEG)))
+    elevation = math.degrees(math.asin(max(-1.0, min(1.0, float(up_v @ toward)))))
+    means = scene.means.detach().double().cpu().numpy()
+    flat = means[:: math.ceil(len(means) / CUT_SAMPLE)] - center
+    flat -= np.outer(flat @ toward, toward)
+    lo, hi = np.quantile(flat, [FRONT_CORE, 1.0 - FRONT_CORE], axis=0)
+    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    corners -= np.outer(corners @ toward, toward)
+    steepest = max(-STEEPEST_DEG, min(STEEPEST_DEG, elevation))
+    return FrontArc(up_v, toward, steepest, center + corners)
+
+
 def auto_views(
     scene: GaussianScene,
     n: int,
@@ -296,12 +346,13 @@ def auto_views(
     camera distance is the smallest at which all eight box corners project inside every image,
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
     long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
-    forward-facing arc on the -y side, Blender's front) or "auto" (= orbit: a lone object has no
-    known front). ``up`` is a vector (world +z, Blender's convention, by default), an axis name
-    (:func:`axis_vector`) or "auto" for :func:`estimate_up_axis`.
+    forward-facing arc on the -y side, Blender's front), "front" (that arc on the side the capture's
+    cameras stood, :func:`front_views`) or "auto" (= orbit: a lone object has no known front). ``up``
+    is a vector (world +z, Blender's convention, by default), an axis name (:func:`axis_vector`) or
+    "auto" for :func:`estimate_up_axis`.
     """
-    if kind not in ("auto", "orbit", "arc"):
-        raise ValueError(f"kind must be 'auto', 'orbit' or 'arc', got {kind!r}")
+    if kind not in VIEW_KINDS:
+        raise ValueError(f"kind must be one of {', '.join(VIEW_KINDS)}, got {kind!r}")
     if margin <= 0:
         raise ValueError(f"margin must be positive, got {margin}")
     lo, hi = _framed_box(scene, quantile)
@@ -311,18 +362,22 @@ def auto_views(
         up = scene_up(scene, quantile)
     elif isinstance(up, str):
         up = axis_vector(up)
-    front = front_for(up)
+    ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front_for(up))
+    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    if kind == "front":
+        arc = front_arc(scene, up, ring["front"], center)
+        ring.update(up=arc.up, front=arc.front, elevation_deg=arc.elevation_deg, arc_deg=FRONT_ARC_DEG)
+        corners = arc.corners
     fov_x = math.radians(fov_deg)
     fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
-    make = arc_views if kind == "arc" else orbit_views
+    make = arc_views if kind in ("arc", "front") else orbit_views
 
     def views(radius: float) -> list[Camera]:
-        ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front)
         return make(center, radius, n, **ring)
 
-    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
-    return views(_fitting_radius(views, corners, sphere_radius, enclosing) * margin)
+    nearest = 0.0 if kind == "front" else sphere_radius  # a front capture's middle may be framed from within its box
+    return views(_fitting_radius(views, corners, nearest, enclosing) * margin)
 
 
 FRAMED_SIGMAS = 3.0

@@ -20,6 +20,7 @@ from .setting import (
     Setting,
     Switch,
     UpAxis,
+    ViewKind,
     setting,
     value_type,
 )
@@ -73,6 +74,17 @@ class TransferConfig(SpeedSettings):
         min=1,
         soft_max=64,
         flag="--views",
+    )
+    view_kind: ViewKind = setting(
+        "orbit",
+        "Automatic Views",
+        "Where the automatic views stand when no cameras are given. Orbit: a ring all round the object. Front: a "
+        "short arc on the side the capture was taken from, read from its splats' sizes (near "
+        "splats are small), for a capture seen from the front, such as a plant before its wall, given without its "
+        "cameras",
+        "views",
+        choices=get_args(ViewKind),
+        flag="--auto-views",
     )
     up: UpAxis = setting(
         "auto",

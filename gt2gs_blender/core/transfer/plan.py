@@ -106,7 +106,7 @@ def plan_run(
     if up == "auto" and (views is None or isinstance(views, int)):
         up = axis_name(scene_up(framed)) or up
     resolution = working_resolution(framed, views, config, up)
-    cameras = fit_cameras(framed, views, resolution, config.n_views, up, cut=config.cut_views)
+    cameras = fit_cameras(framed, views, resolution, config.n_views, up, kind=config.view_kind, cut=config.cut_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     start = stylise_start(original, selected, config.stylised_sh_degree)
     content = hidden = frame = None

@@ -54,7 +54,7 @@ def working_resolution(
 def object_pixels(scene: GaussianScene, views: Sequence[Camera] | int | None, config: TransferConfig, up: str) -> float:
     """Mean count of the pixels that show ``scene`` in a view at ``config.resolution``: its pixels in a few small
     renders of the run's views, scaled by the square of the sides' ratio."""
-    probes = fit_cameras(scene, views, PROBE_SIDE, config.n_views, up)
+    probes = fit_cameras(scene, views, PROBE_SIDE, config.n_views, up, kind=config.view_kind)
     spread = probes[:: max(1, len(probes) // PROBE_VIEWS)][:PROBE_VIEWS]
     covered = sum(float((_alpha(scene, cam, config.backend) > OBJECT_ALPHA).float().sum()) for cam in spread)
     return covered / len(spread) * (config.resolution / PROBE_SIDE) ** 2

@@ -18,6 +18,8 @@ Device = Literal["auto", "cpu", "cuda"]
 Rasterizer = Literal["auto", "torch", "cpu", "numba", "gsplat"]
 UpAxis = Literal["+z", "-z", "+y", "-y", "+x", "-x", "auto"]
 """The scene's up direction for automatic views (``cameras.axes.axis_vector``'s names, or estimated)."""
+ViewKind = Literal["orbit", "front"]
+"""Where automatic views stand: a ring all round, or an arc on the side the capture's cameras stood."""
 
 PARTS = {
     "views": "Views",

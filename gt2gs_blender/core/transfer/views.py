@@ -62,15 +62,17 @@ def fit_cameras(
     n_default: int,
     up: str = "+z",
     *,
+    kind: str = "orbit",
     cut: bool = False,
 ) -> list[Camera]:
-    """Automatic views (a count or None) around the ``up`` axis, framed in ``resolution`` squares (``cut``: and cut
-    to the splats, so a tall or wide object is not rendered with empty bands), or the given cameras resized so their
-    longest side is ``resolution``."""
+    """Automatic views (a count or None) of ``kind`` (``auto_views``'s) about the ``up`` axis, framed in
+    ``resolution`` squares (``cut``: and cut to the splats, so a tall or wide object is not rendered with empty
+    bands), or the given cameras resized so their longest side is ``resolution``."""
     if isinstance(views, int) and views < 1:
         raise GT2GSError(f"views: at least 1 automatic view, got {views}")
     if views is None or isinstance(views, int):
-        framed = auto_views(scene, n_default if views is None else views, width=resolution, height=resolution, up=up)
+        count = n_default if views is None else views
+        framed = auto_views(scene, count, width=resolution, height=resolution, kind=kind, up=up)
         return cut_to_scene(framed, scene) if cut else framed
     cameras = list(views)
     if not cameras:

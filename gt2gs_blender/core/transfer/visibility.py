@@ -54,7 +54,9 @@ def require_visible(
     scene = scene.detach().to(device)
     selected = region_mask(region, n, device)
     framed = scene if selected is None else scene.subset(selected)
-    cameras = fit_cameras(framed, views, config.resolution, config.n_views, config.up, cut=config.cut_views)
+    cameras = fit_cameras(
+        framed, views, config.resolution, config.n_views, config.up, kind=config.view_kind, cut=config.cut_views
+    )
     if visible_in_any(scene, cameras, config.backend):
         return
     where = f"the {len(cameras)} views of {views_source}" if views_source else f"the {len(cameras)} automatic views"
