@@ -132,8 +132,8 @@ def add_camera(view: Any, collection: Any, name: str | None = None) -> Any:
 def views_from_front(settings, scene) -> bool | None:
     """Whether the views a run will take (``settings.view_source``) all look at the scene from one side, what
     the automatic Projection and Texture Moves Splats follow; None while there are no views to tell."""
-    if settings.view_source == "AUTO":
-        return settings.n_views == 1  # automatic views ring the object; one alone looks from one side
+    if settings.view_source == "AUTO":  # the ring surrounds the object; one view alone or the front arc do not
+        return settings.n_views == 1 or settings.view_kind == "front"
     if settings.view_source == "CAMERAS_JSON":
         import bpy
 

@@ -48,7 +48,7 @@ FRONT = {
         "keep_accents",
         "scene_brightness",
     ),
-    "Views": ("n_views",),
+    "Views": ("n_views", "view_kind"),
     "Quality": ("lambda_content",),
 }
 """Settings a sub-panel shows first, beside its own front-end properties (those the config has)."""
@@ -181,11 +181,12 @@ def _draw_texture_front(layout, context) -> None:
 
 
 def _draw_views_front(layout, context) -> None:
-    """Views: where they come from (the view count only for automatic views)."""
+    """Views: where they come from (the view count and where they stand only for automatic views)."""
     settings = context.scene.gt2gs
     layout.prop(settings, "view_source")
     if settings.view_source == "AUTO":
         layout.prop(settings, "n_views")
+        layout.prop(settings, "view_kind")
     elif settings.view_source == "COLLECTION":
         layout.prop(settings, "camera_collection")
     elif settings.view_source == "CAMERAS_JSON":

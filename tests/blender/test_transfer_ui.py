@@ -645,7 +645,7 @@ def test_automatic_settings_show_the_value_a_run_uses():
 
 def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
     """What the automatic Projection and Texture Moves Splats follow, from each source of views: automatic
-    views ring the object; scene cameras and a cameras.json count by where they look."""
+    views ring the object unless one or Front; scene cameras and a cameras.json count by where they look."""
     from mathutils import Euler
 
     from gt2gs_blender.blender.views import views_from_front
@@ -656,6 +656,9 @@ def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
     assert views_from_front(settings, scene) is False
     settings.n_views = 1
     assert views_from_front(settings, scene) is True
+    settings.n_views, settings.view_kind = 16, "front"
+    assert views_from_front(settings, scene) is True  # the front arc looks from one side
+    settings.view_kind = "orbit"
     settings.view_source = "SCENE_CAMERAS"
     assert views_from_front(settings, scene) is None  # no camera yet
     for name, x, turn in (("left", -1.0, 10.0), ("right", 1.0, -10.0)):

@@ -347,7 +347,7 @@ def auto_views(
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
     long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
     forward-facing arc on the -y side, Blender's front), "front" (that arc on the side the capture's
-    cameras stood, :func:`front_views`) or "auto" (= orbit: a lone object has no known front). ``up``
+    cameras stood, :func:`front_arc`) or "auto" (= orbit: a lone object has no known front). ``up``
     is a vector (world +z, Blender's convention, by default), an axis name (:func:`axis_vector`) or
     "auto" for :func:`estimate_up_axis`.
     """
@@ -364,10 +364,12 @@ def auto_views(
         up = axis_vector(up)
     ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front_for(up))
     corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    nearest = sphere_radius
     if kind == "front":
         arc = front_arc(scene, up, ring["front"], center)
         ring.update(up=arc.up, front=arc.front, elevation_deg=arc.elevation_deg, arc_deg=FRONT_ARC_DEG)
-        corners = arc.corners
+        if float(np.ptp(arc.corners, axis=0).max()) / 2.0 >= _splat_reach(scene):
+            corners, nearest = arc.corners, 0.0  # a front capture's middle may be framed from within its box
     fov_x = math.radians(fov_deg)
     fov_y = 2.0 * math.atan(math.tan(fov_x / 2.0) * height / width)
     make = arc_views if kind in ("arc", "front") else orbit_views
@@ -376,7 +378,6 @@ def auto_views(
         return make(center, radius, n, **ring)
 
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
-    nearest = 0.0 if kind == "front" else sphere_radius  # a front capture's middle may be framed from within its box
     return views(_fitting_radius(views, corners, nearest, enclosing) * margin)
 
 
@@ -389,11 +390,16 @@ def _framed_box(scene: GaussianScene, quantile: float) -> tuple[np.ndarray, np.n
     footprint (``FRAMED_SIGMAS`` x the median largest sigma) on every axis, a cube that reaches that far: one splat,
     or splats at one point, are framed instead of looked at from inside (a flat scene keeps its flat box)."""
     lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
-    reach = FRAMED_SIGMAS * float(scene.scales.detach().max(dim=1).values.median())
+    reach = _splat_reach(scene)
     if float((hi - lo).max()) / 2.0 >= reach:
         return lo, hi
     middle = (lo + hi) / 2.0
     return middle - reach, middle + reach
+
+
+def _splat_reach(scene: GaussianScene) -> float:
+    """``FRAMED_SIGMAS`` x a typical splat's largest sigma: the least half-size a framed box has."""
+    return FRAMED_SIGMAS * float(scene.scales.detach().max(dim=1).values.median())
 
 
 CUT_SHARE = 0.999
