@@ -12,10 +12,10 @@ import torch
 
 from gt2gs_blender.core.cameras.generate import FRONT_ARC_DEG, auto_views
 from gt2gs_blender.core.cameras.viewpoint import MIN_SPLATS, fitted_viewpoint
+from gt2gs_blender.core.errors import GT2GSError
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.config import TransferConfig
 from gt2gs_blender.core.transfer.plan import plan_run
-from gt2gs_blender.core.errors import GT2GSError
 
 CAMERAS_AT = np.array([0.4, -4.0, 0.3])
 """Where the synthetic capture's cameras stood: in front of it, on -Y, a little up and to the right."""
@@ -87,7 +87,7 @@ def test_front_views_stand_where_the_cameras_could_have_been() -> None:
     middle = fitted_viewpoint(scene).middle
     for cam in cameras:
         assert angle_deg(cam.center - middle, CAMERAS_AT - middle) < FRONT_ARC_DEG / 2 + 8.0
-        right, down, forward = cam.cam_to_world[:3, :3].T
+        _, down, forward = cam.cam_to_world[:3, :3].T
         assert down @ [0.0, 0.0, 1.0] < -0.9
         assert angle_deg(forward, middle - cam.center) < 10.0
     orbit = auto_views(scene, 8, width=96, height=96, kind="orbit", up="+z")
