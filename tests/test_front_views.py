@@ -61,6 +61,19 @@ def test_the_fit_finds_the_side_the_cameras_stood_on_and_how_far() -> None:
     assert viewpoint.gain > 0.1
 
 
+def test_a_moved_copy_is_fitted_again_not_answered_from_the_last_fit() -> None:
+    """The fit is kept by the splats' content: the same capture read again gives the same answer, a copy moved by
+    one unit gives a point moved by one unit."""
+    scene = front_capture(n=3000)
+    first = fitted_viewpoint(scene)
+    assert fitted_viewpoint(scene.clone()) is first
+    moved = scene.clone()
+    moved.means.add_(torch.tensor([1.0, 0.0, 0.0], dtype=torch.float64))
+    np.testing.assert_allclose(fitted_viewpoint(moved).point, first.point + np.array([1.0, 0.0, 0.0]), atol=1e-3)
+    with pytest.raises(ValueError):
+        first.point[0] = 0.0
+
+
 def test_splats_of_one_size_say_nothing_and_too_few_say_nothing_at_all() -> None:
     """One size for all: the distance explains nothing (gain near 0); under ``MIN_SPLATS`` opaque splats, or
     none with a finite size, there is no fit."""

@@ -4,6 +4,7 @@ the front, given without its cameras, stand on that side."""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -51,6 +52,22 @@ def fitted_viewpoint(scene: GaussianScene, count: int = SAMPLE) -> Viewpoint | N
     centres, log_size = _sample(scene, count)
     if len(centres) < MIN_SPLATS:
         return None
+    key = hashlib.blake2b(centres.numpy().tobytes() + log_size.numpy().tobytes(), digest_size=16).digest()
+    if key not in _FITTED:
+        _FITTED[key] = _fit(centres, log_size)
+        while len(_FITTED) > CACHED:
+            _FITTED.pop(next(iter(_FITTED)))
+    return _FITTED[key]
+
+
+CACHED = 4
+"""Fits kept, by the read splats' content: a run reads one scene's several times (its size probe, its views, the
+visibility check, the before/after strip), 1-2 s each."""
+_FITTED: dict[bytes, Viewpoint | None] = {}
+
+
+def _fit(centres: torch.Tensor, log_size: torch.Tensor) -> Viewpoint | None:
+    """:func:`fitted_viewpoint` of the read splats."""
     lo, hi = (torch.quantile(centres, q, dim=0) for q in (QUANTILE, 1.0 - QUANTILE))
     middle, extent = (lo + hi) / 2.0, float((hi - lo).norm())
     if not extent > 0.0:
@@ -67,7 +84,10 @@ def fitted_viewpoint(scene: GaussianScene, count: int = SAMPLE) -> Viewpoint | N
         return None
     flat = float(F.huber_loss(log_size, torch.full_like(log_size, float(log_size.median())), delta=HUBER))
     gain = 1.0 - fitted / flat if flat > 0.0 else 0.0
-    return Viewpoint(point[:3].numpy(), middle.numpy(), extent, gain)
+    at, centre = point[:3].numpy(), middle.numpy()
+    at.setflags(write=False)  # shared by every caller the cache answers
+    centre.setflags(write=False)
+    return Viewpoint(at, centre, extent, gain)
 
 
 def _sample(scene: GaussianScene, count: int) -> tuple[torch.Tensor, torch.Tensor]:
