@@ -137,8 +137,9 @@ def strip_cameras(
     or the front arc) about the ``up`` axis cut to the object and enlarged to fill its cells (a wide donut shows
     larger)."""
     if views is None or isinstance(views, int):
-        size = dict(width=STRIP_SIZE, height=STRIP_SIZE)
-        ring = auto_views(original, STRIP_VIEWS, **size, kind=kind, elevation_deg=30.0, up=up)
+        ring = auto_views(
+            original, STRIP_VIEWS, width=STRIP_SIZE, height=STRIP_SIZE, kind=kind, elevation_deg=30.0, up=up
+        )
         picked = cut_to_scene(ring, original)
     else:
         cameras = list(views)

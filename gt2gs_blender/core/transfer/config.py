@@ -79,9 +79,8 @@ class TransferConfig(SpeedSettings):
         "orbit",
         "Automatic Views",
         "Where the automatic views stand when no cameras are given. Orbit: a ring all round the object. Front: a "
-        "short arc on the side the capture was taken from, read from its splats' sizes (near "
-        "splats are small), for a capture seen from the front, such as a plant before its wall, given without its "
-        "cameras",
+        "short arc on the side the capture was taken from, read from its splats' sizes (splats near the cameras "
+        "are small), for a capture seen from the front, such as a plant before its wall, given without its cameras",
         "views",
         choices=get_args(ViewKind),
         flag="--auto-views",
