@@ -44,8 +44,8 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
     },
     "view_kind": {
         "orbit": "A ring all round the object (an object seen from all sides)",
-        "front": "A short arc on the side the capture was taken from, read from its splats' sizes (a capture seen "
-        "from the front, given without its cameras)",
+        "front": "A short arc on the side the capture was taken from, read from its splats' sizes, else on "
+        "Blender's front (a capture seen from the front, given without its cameras)",
     },
     "layout_projection": {
         "auto": f"View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",

@@ -68,7 +68,7 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
         choices=("orbit", "arc", "front"),
         default="orbit",
         help="generated views: a full ring, a 60° forward-facing arc on -y, or a 30° arc on the side the capture "
-        "was taken from, read from its splats' sizes (default: orbit)",
+        "was taken from, read from its splats' sizes where they tell (else the arc) (default: orbit)",
     )
     p.add_argument(
         "--up",

@@ -307,12 +307,14 @@ class FrontArc:
     corners: np.ndarray
 
 
-def front_arc(scene: GaussianScene, up: Sequence[float], fallback: Sequence[float], center: np.ndarray) -> FrontArc:
-    """The arc on the side the capture's cameras stood (:func:`fitted_viewpoint`; ``fallback`` as front when the
-    splats do not say): ``up`` unless the cameras looked within ``LEVEL_DEG`` of it, then the first of a trainer's
-    -Y and Blender's +Z (then +X) across the look."""
+def front_arc(scene: GaussianScene, up: Sequence[float], center: np.ndarray) -> FrontArc | None:
+    """The arc on the side the capture's cameras stood (:func:`fitted_viewpoint`), None when the splats do not say
+    (a capture seen all round): ``up`` unless the cameras looked within ``LEVEL_DEG`` of it, then the first of a
+    trainer's -Y and Blender's +Z (then +X) across the look."""
     viewpoint = fitted_viewpoint(scene)
-    toward = _unit(fallback, "front") if viewpoint is None else viewpoint.direction
+    if viewpoint is None or not viewpoint.telling:
+        return None
+    toward = viewpoint.direction
     up_v = _unit(up, "up")
     if abs(float(up_v @ toward)) > math.cos(math.radians(LEVEL_DEG)):
         across = [np.array(CONVENTION[axis]) for axis in (1, 2, 0)]
@@ -347,8 +349,9 @@ def auto_views(
     camera distance is the smallest at which all eight box corners project inside every image,
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
     long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
-    forward-facing arc on the -y side, Blender's front), "front" (that arc on the side the capture's
-    cameras stood, :func:`front_arc`) or "auto" (= orbit: a lone object has no known front). ``up``
+    forward-facing arc on the -y side, Blender's front), "front" (a 30 degree arc on the side the
+    capture's cameras stood, :func:`front_arc`; "arc" where its splats do not say) or "auto" (= orbit: a
+    lone object has no known front). ``up``
     is a vector (world +z, Blender's convention, by default), an axis name (:func:`axis_vector`) or
     "auto" for :func:`estimate_up_axis`.
     """
@@ -366,8 +369,8 @@ def auto_views(
     ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front_for(up))
     corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
     nearest = sphere_radius
-    if kind == "front":
-        arc = front_arc(scene, up, ring["front"], center)
+    arc = front_arc(scene, up, center) if kind == "front" else None
+    if arc is not None:
         ring.update(up=arc.up, front=arc.front, elevation_deg=arc.elevation_deg, arc_deg=FRONT_ARC_DEG)
         if float(np.ptp(arc.corners, axis=0).max()) / 2.0 >= _splat_reach(scene):
             corners, nearest = arc.corners, 0.0  # a front capture's middle may be framed from within its box

@@ -25,6 +25,9 @@ QUANTILE = 0.02
 """The capture's middle and extent: the box between these quantiles of the read splats' centres (floaters aside)."""
 MIN_SPLATS = 16
 """Fewer opaque splats than this say nothing of where the cameras stood."""
+MIN_GAIN = 0.1
+"""Below this gain the sizes do not say where the cameras stood: captures seen all round read 0.03-0.04 (the guitar,
+the robot, whose fitted point lay under its ground), the fern seen from the front 0.30."""
 
 
 @dataclass(frozen=True)
@@ -37,6 +40,11 @@ class Viewpoint:
     middle: np.ndarray
     extent: float
     gain: float
+
+    @property
+    def telling(self) -> bool:
+        """Whether the sizes say where the cameras stood (``gain`` at least ``MIN_GAIN``)."""
+        return self.gain >= MIN_GAIN
 
     @property
     def direction(self) -> np.ndarray:

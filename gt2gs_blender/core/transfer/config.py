@@ -80,7 +80,8 @@ class TransferConfig(SpeedSettings):
         "Automatic Views",
         "Where the automatic views stand when no cameras are given. Orbit: a ring all round the object. Front: a "
         "short arc on the side the capture was taken from, read from its splats' sizes (splats near the cameras "
-        "are small), for a capture seen from the front, such as a plant before its wall, given without its cameras",
+        "are small; where they do not tell, the arc on Blender's front), for a capture seen from the front, such as "
+        "a plant before its wall, given without its cameras",
         "views",
         choices=get_args(ViewKind),
         flag="--auto-views",
