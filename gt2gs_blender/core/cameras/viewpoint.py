@@ -18,7 +18,8 @@ from ..scene.gaussians import GaussianScene
 OPAQUE = 0.5
 """Only splats above this opacity are read: faint ones are the optimiser's leftovers, their sizes say little."""
 SAMPLE = 20_000
-"""At most this many splats (drawn with a fixed seed): the point is as good from 20,000 as from 500,000 (1-2 s)."""
+"""At most this many splats (drawn with a fixed seed): from 80,000 of the guitar's and the robot's the direction moves
+under 1° and the gain 0.002; the fit takes seconds (the fern's 8,000 opaque splats 1.7 s on 2 cores)."""
 HUBER = 0.5
 """Residuals beyond this in log size (x1.65) count linearly: a few huge background splats do not pull the point."""
 QUANTILE = 0.02
@@ -70,7 +71,7 @@ def fitted_viewpoint(scene: GaussianScene, count: int = SAMPLE) -> Viewpoint | N
 
 CACHED = 4
 """Fits kept, by the read splats' content: a run reads one scene's several times (its size probe, its views, the
-visibility check, the before/after strip), 1-2 s each."""
+visibility check, the before/after strip)."""
 _FITTED: dict[bytes, Viewpoint | None] = {}
 
 
