@@ -350,10 +350,9 @@ def auto_views(
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
     long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
     forward-facing arc on the -y side, Blender's front), "front" (a 30 degree arc on the side the
-    capture's cameras stood, :func:`front_arc`; "arc" where its splats do not say) or "auto" (= orbit: a
-    lone object has no known front). ``up``
-    is a vector (world +z, Blender's convention, by default), an axis name (:func:`axis_vector`) or
-    "auto" for :func:`estimate_up_axis`.
+    capture's cameras stood, :func:`front_arc`; "arc" where its splats do not say) or "auto" (= orbit:
+    a lone object has no known front). ``up`` is a vector (world +z, Blender's convention, by default),
+    an axis name (:func:`axis_vector`) or "auto" for :func:`estimate_up_axis`.
     """
     if kind not in VIEW_KINDS:
         raise ValueError(f"kind must be one of {', '.join(VIEW_KINDS)}, got {kind!r}")
