@@ -96,8 +96,7 @@ def test_splats_of_one_size_say_nothing_and_too_few_say_nothing_at_all() -> None
 
 def test_front_views_stand_where_the_cameras_could_have_been() -> None:
     """Every front view stands on the cameras' side, within the arc's half width of their direction, upright (the
-    image's up is +Z's side), and looks at the capture: the wall fills most of each view. The orbit's views go
-    behind the wall."""
+    image's up is +Z's side), and looks at the capture's middle. The orbit's views go behind the wall."""
     scene = front_capture()
     cameras = auto_views(scene, 8, width=96, height=96, kind="front", up="+z")
     middle = fitted_viewpoint(scene).middle
