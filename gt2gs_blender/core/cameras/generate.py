@@ -307,6 +307,11 @@ class FrontArc:
     corners: np.ndarray
 
 
+def box_corners(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """The eight corners (8, 3) of the axis-aligned box from ``lo`` to ``hi``."""
+    return np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+
+
 def front_arc(scene: GaussianScene, up: Sequence[float], center: np.ndarray) -> FrontArc | None:
     """The arc on the side the capture's cameras stood (:func:`fitted_viewpoint`), None when the splats do not say
     (a capture seen all round): ``up`` unless the cameras looked within ``LEVEL_DEG`` of it, then the first of a
@@ -324,7 +329,7 @@ def front_arc(scene: GaussianScene, up: Sequence[float], center: np.ndarray) -> 
     flat = means[:: math.ceil(len(means) / CUT_SAMPLE)] - center
     flat -= np.outer(flat @ toward, toward)
     lo, hi = np.quantile(flat, [FRONT_CORE, 1.0 - FRONT_CORE], axis=0)
-    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    corners = box_corners(lo, hi)
     corners -= np.outer(corners @ toward, toward)
     steepest = max(-STEEPEST_DEG, min(STEEPEST_DEG, elevation))
     return FrontArc(up_v, toward, steepest, center + corners)
@@ -366,7 +371,7 @@ def auto_views(
     elif isinstance(up, str):
         up = axis_vector(up)
     ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front_for(up))
-    corners = np.array([[(lo, hi)[(i >> a) & 1][a] for a in range(3)] for i in range(8)])
+    corners = box_corners(lo, hi)
     nearest = sphere_radius
     arc = front_arc(scene, up, center) if kind == "front" else None
     if arc is not None:
