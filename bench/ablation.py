@@ -46,7 +46,8 @@ from bench.common import parse_overrides
 from bench.recognise_scenes import fern_fit_dir
 from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.files import load_views
-from gt2gs_blender.core.cameras.generate import auto_views, camera_path
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.cameras.poses import camera_path
 from gt2gs_blender.core.features.lpips import LPIPS, load_lpips
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene

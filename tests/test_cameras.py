@@ -23,15 +23,10 @@ from gt2gs_blender.core.cameras.camera import Camera, stack_cameras
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json, save_cameras_json
 from gt2gs_blender.core.cameras.colmap import load_colmap, load_colmap_points
 from gt2gs_blender.core.cameras.files import load_views
-from gt2gs_blender.core.cameras.generate import (
-    arc_views,
-    auto_views,
-    camera_path,
-    estimate_up_axis,
-    look_at,
-    orbit_views,
-)
+from gt2gs_blender.core.cameras.generate import auto_views
 from gt2gs_blender.core.cameras.llff import LLFFData, load_llff
+from gt2gs_blender.core.cameras.poses import arc_views, camera_path, look_at, orbit_views
+from gt2gs_blender.core.cameras.up import estimate_up_axis
 from gt2gs_blender.core.errors import CameraFileError
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import GaussianScene

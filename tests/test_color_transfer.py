@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras.generate import orbit_views
+from gt2gs_blender.core.cameras.poses import orbit_views
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.gaussians import SH_C0, GaussianScene
 from gt2gs_blender.core.transfer.color_transfer import apply_to_images, apply_to_scene, fit_color_transform

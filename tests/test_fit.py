@@ -10,8 +10,8 @@ import torch
 
 from gt2gs_blender.app.cli import main as cli
 from gt2gs_blender.core.cameras.cameras_json import load_cameras_json
-from gt2gs_blender.core.cameras.generate import orbit_views
 from gt2gs_blender.core.cameras.llff import load_llff
+from gt2gs_blender.core.cameras.poses import orbit_views
 from gt2gs_blender.core.fit.init import frustum_points, knn_scales, scene_from_points
 from gt2gs_blender.core.fit.trainer import FitConfig, Trainer, evaluate, llff_split, load_images
 from gt2gs_blender.core.render import render

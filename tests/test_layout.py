@@ -253,7 +253,7 @@ def test_the_view_projection_shows_the_texture_as_the_first_view_does(tilt):
 def test_auto_projection_throws_from_the_view_for_captures_and_boxes_orbits():
     """``auto``: cameras that all look the same way (a capture) take the view projection, a ring the box; no
     views, or views that cancel out, are no capture."""
-    from gt2gs_blender.core.cameras.generate import look_at
+    from gt2gs_blender.core.cameras.poses import look_at
     from gt2gs_blender.core.cameras.spread import seen_from_front
     from gt2gs_blender.core.transfer.layout import projection
 

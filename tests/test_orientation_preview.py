@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.cameras.generate import look_at
+from gt2gs_blender.core.cameras.poses import look_at
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, preview, texture_layer
 from gt2gs_blender.core.transfer.presets import preset

@@ -10,7 +10,8 @@ import pytest
 import torch
 
 from gt2gs_blender.core.cameras.camera import Camera
-from gt2gs_blender.core.cameras.generate import auto_views, look_at
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.cameras.poses import look_at
 from gt2gs_blender.core.features.extractor import FeatureExtractor
 from gt2gs_blender.core.features.specs import VGG19_NORM_RELU3
 from gt2gs_blender.core.features.weights import ResolvedWeights

@@ -11,7 +11,8 @@ import torch
 
 from gt2gs_blender.core.api import read_scene, render
 from gt2gs_blender.core.cameras.axes import axis_vector, up_from_rotation
-from gt2gs_blender.core.cameras.generate import auto_views, estimate_up_axis, front_for
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.cameras.up import estimate_up_axis, front_for
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 QUARTER_TURN_X = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])

@@ -8,7 +8,9 @@ import pytest
 import torch
 
 from gt2gs_blender.core.api import read_scene, render
-from gt2gs_blender.core.cameras.generate import CUT_STEP, auto_views, cut_to_points, look_at
+from gt2gs_blender.core.cameras.cut import CUT_STEP, cut_to_points
+from gt2gs_blender.core.cameras.generate import auto_views
+from gt2gs_blender.core.cameras.poses import look_at
 from gt2gs_blender.core.scene.gaussians import GaussianScene
 from gt2gs_blender.core.transfer.views import fit_cameras
 
@@ -81,14 +83,14 @@ def test_a_few_floaters_do_not_decide_the_cut() -> None:
 def test_a_large_cloud_is_cut_from_a_sample_as_from_all_its_points(monkeypatch: pytest.MonkeyPatch) -> None:
     """Past ``CUT_SAMPLE`` centres the cut reads an even stride of them: a 300,000-point elongated cloud (ordered
     along its length, as a file sorted in space would be) gets the cut that all of its points give."""
-    from gt2gs_blender.core.cameras import generate
+    from gt2gs_blender.core.cameras import cut
 
     rng = np.random.default_rng(2)
     cloud = rng.normal(scale=(0.1, 0.1, 0.5), size=(300_000, 3))
     cloud = cloud[np.argsort(cloud[:, 2])]
     cams = ring_views()
     sampled = cut_to_points(cams, cloud)
-    monkeypatch.setattr(generate, "CUT_SAMPLE", len(cloud))
+    monkeypatch.setattr(cut, "CUT_SAMPLE", len(cloud))
     whole = cut_to_points(cams, cloud)
     assert [(c.width, c.height) for c in sampled] == [(c.width, c.height) for c in whole]
     assert sampled[0].width < 256 and sampled[0].height <= 256

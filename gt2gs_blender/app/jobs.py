@@ -21,7 +21,8 @@ import torch
 
 from ..core.atomic import ZIP_MAGIC, atomic_write, read_head
 from ..core.cameras.camera import Camera
-from ..core.cameras.generate import auto_views, cut_to_scene
+from ..core.cameras.cut import cut_to_scene
+from ..core.cameras.generate import auto_views
 from ..core.errors import InputFileError
 from ..core.progress import ProgressCallback
 from ..core.render import render

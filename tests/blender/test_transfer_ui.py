@@ -359,7 +359,7 @@ def test_scene_cameras_become_views_in_object_space(fresh):
 def test_a_core_camera_becomes_a_blender_camera_that_sees_the_same(fresh):
     """add_camera then camera_entries gives back the core camera: same size, focal length and projection."""
     load_cameras_json = engine_cameras()
-    from gt2gs_blender.core.cameras.generate import look_at
+    from gt2gs_blender.core.cameras.poses import look_at
 
     scene = fresh.context.scene
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 200, 120, 100

@@ -52,3 +52,12 @@ def axis_vector(name: str) -> tuple[float, float, float]:
     vector = [0.0, 0.0, 0.0]
     vector["xyz".index(letter)] = -1.0 if sign == "-" else 1.0
     return (vector[0], vector[1], vector[2])
+
+
+def unit_vector(v: Sequence[float], what: str) -> np.ndarray:
+    """``v`` normalised; ValueError if it is zero or not finite."""
+    arr = np.asarray(v, dtype=np.float64)
+    norm = np.linalg.norm(arr)
+    if arr.shape != (3,) or not math.isfinite(norm) or norm < 1e-12:
+        raise ValueError(f"{what} must be a finite non-zero 3-vector, got {arr.tolist()}")
+    return arr / norm

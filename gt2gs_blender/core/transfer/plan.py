@@ -21,7 +21,7 @@ import torch
 
 from ..cameras.axes import axis_name
 from ..cameras.camera import Camera
-from ..cameras.generate import scene_up
+from ..cameras.up import scene_up
 from ..device import resolve_device
 from ..errors import GT2GSError
 from ..scene.gaussians import GaussianScene

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import torch
 
 from ..cameras.camera import Camera
-from ..cameras.generate import auto_views, cut_to_scene
+from ..cameras.cut import cut_to_scene
+from ..cameras.generate import auto_views
 from ..errors import GT2GSError
 from ..features.extractor import FeatureExtractor
 from ..render import render
