@@ -19,10 +19,10 @@ from gt2gs_blender.core.transfer.layout import (
     layout_colours,
     layout_frame,
     layout_images,
-    surface_normals,
     texture_height_for,
     with_colours,
 )
+from gt2gs_blender.core.transfer.normals import surface_normals
 from gt2gs_blender.core.transfer.texture_bank import build_texture_bank, crop_side, tiled_for_crop
 from gt2gs_blender.core.transfer.views import render_views
 

@@ -18,10 +18,7 @@ every view agrees on.
   where the box cut a fern's leaves into a patchwork of planes). Like the texture bank's depth groups,
   it shows the texture ``1/r_k`` as large in the farther groups (at most ``MAX_DEPTH_RATIO``), so a
   nearer surface shows larger texture and depth edges break it.
-- Normals come from the views' rendered depth (blurred, so sprinkles and specks do not flip the
-  plane a splat samples), each splat taking the normal of the pixel it projects to in the view that
-  sees it most frontally; splats no view sees take their nearest seen neighbour's. The smallest
-  scale axis of a 3DGS splat is a poor normal (a third within 25° of the surface's on the donut).
+- Normals: the rendered surface's under each splat (:mod:`.normals`), for the box's blend of its planes.
 - Splats coarser than the texture's detail are split (``detail``), so a plank edge can lie
   between them, each child taking the layout's colour at its own place.
 - While the GT² loss refines the look, a layout term keeps the structure: each view's render is
@@ -39,14 +36,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import get_args
 
-import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from ..cameras.camera import Camera
 from ..cameras.spread import cameras_from_front
-from ..cameras.warp import backproject, expected_depth, reproject
+from ..cameras.warp import backproject, expected_depth
 from ..errors import GT2GSError
 from ..features.specs import RENDER_SCALE
 from ..render import render
@@ -58,6 +54,7 @@ from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .grain import periodic_blur
 from .losses import luma
+from .normals import SURFACE_ALPHA, normal_map, surface_normals
 from .setting import Projection
 from .shade import (
     bright_end,
@@ -72,12 +69,6 @@ from .shade import (
 from .texture_bank import bank_scales, screen_rotation
 from .views import ViewSet
 
-SURFACE_ALPHA = 0.9
-"""Pixels at least this opaque carry a surface normal."""
-NORMAL_BLUR_PX = 3.0
-"""Gaussian blur (pixels) of the depth before differencing: normals of the surface, not of its specks."""
-DEPTH_TOLERANCE = 0.03
-"""A splat is on the surface a pixel shows when its depth is within this fraction of the pixel's."""
 BLEND_POWER = 8.0
 """Tri-planar blend weights |n_i|^p: sharp transitions (little ghosting) that still blend at 45°."""
 PREFILTER = 0.5
@@ -210,74 +201,11 @@ def _nearest_depth(views: ViewSet, n_scales: int) -> float:
     return max(lo + 0.5 * (hi - lo) / max(n_scales, 1), 1e-12)
 
 
-@torch.no_grad()
-def surface_normals(
-    scene: GaussianScene, cameras: Sequence[Camera], depths: Sequence[torch.Tensor], alphas: Sequence[torch.Tensor]
-) -> torch.Tensor:
-    """(N, 3) unit normal per splat from the views' rendered depth (module notes)."""
-    n = len(scene)
-    best = torch.full((n,), -1.0, dtype=torch.float64)
-    normals = torch.zeros(n, 3, dtype=torch.float64)
-    means = scene.means.detach().cpu()
-    for camera, depth, alpha in zip(cameras, depths, alphas):
-        normal_map, facing_map, valid = _normal_map(camera, depth.cpu(), alpha.cpu())
-        uv, z = reproject(means, camera)
-        col, row = uv[:, 0].floor().long(), uv[:, 1].floor().long()
-        inside = (z > 0) & (col >= 0) & (col < camera.width) & (row >= 0) & (row < camera.height)
-        col, row = col.clamp(0, camera.width - 1), row.clamp(0, camera.height - 1)
-        surface = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA).double()[row, col]
-        seen = inside & valid[row, col] & ((z - surface).abs() <= DEPTH_TOLERANCE * surface)
-        facing = torch.where(seen, facing_map[row, col], torch.full_like(z, -1.0))
-        better = facing > best
-        best = torch.where(better, facing, best)
-        normals[better] = normal_map[row[better], col[better]]
-    return _fill_unseen(means, normals, best >= 0).float().to(scene.device)
-
-
 def splat_normals(scene: GaussianScene, views: ViewSet, frame: LayoutFrame) -> torch.Tensor:
     """The splats' normals the frame's projection needs: the surface's for the box, none (zeros) for the view."""
     if frame.projector is not None:
         return torch.zeros(len(scene), 3, dtype=scene.dtype, device=scene.device)
     return surface_normals(scene, views.cameras, views.depths, views.alphas)
-
-
-def _normal_map(camera: Camera, depth: torch.Tensor, alpha: torch.Tensor) -> tuple[torch.Tensor, ...]:
-    """Per pixel: the unit normal facing the camera (H,W,3), its cosine to the ray (H,W) and
-    whether the pixel and its blurred neighbourhood are opaque surface (H,W)."""
-    covered = (alpha >= SURFACE_ALPHA).double().numpy()
-    z = expected_depth(depth, alpha, SURFACE_ALPHA).double().numpy()
-    weight = cv2.GaussianBlur(covered, (0, 0), NORMAL_BLUR_PX)
-    smooth = cv2.GaussianBlur(z, (0, 0), NORMAL_BLUR_PX) / np.maximum(weight, 1e-6)
-    points = backproject(torch.from_numpy(smooth), camera)
-    dx, dy = torch.zeros_like(points), torch.zeros_like(points)
-    dx[:, 1:-1] = points[:, 2:] - points[:, :-2]
-    dy[1:-1] = points[2:] - points[:-2]
-    normal = F.normalize(torch.cross(dx, dy, dim=-1), dim=-1)
-    to_camera = F.normalize(torch.from_numpy(camera.center) - points, dim=-1)
-    facing = (normal * to_camera).sum(-1)
-    normal = torch.where(facing[..., None] < 0, -normal, normal)
-    valid = torch.from_numpy((covered > 0) & (weight > 0.99)) & (normal.norm(dim=-1) > 0.5)
-    return normal, facing.abs(), valid
-
-
-EXACT_NEAREST = dict(algorithm=4, leaf_max_size=10)
-"""FLANN's single k-d tree: exact and deterministic nearest neighbours (the randomised forest gave a
-run-to-run different neighbour for ~10 % of queries, so the same scene laid out differently), and faster
-(0.2 s against 2.5 s for 100k queries in 400k points, 2 cores)."""
-
-
-def _fill_unseen(means: torch.Tensor, normals: torch.Tensor, seen: torch.Tensor) -> torch.Tensor:
-    """Normals of splats no view sees, from their nearest seen splat (the view's up when none is seen)."""
-    if bool(seen.all()):
-        return normals
-    if not bool(seen.any()):
-        return torch.tensor([0.0, 0.0, 1.0], dtype=normals.dtype).expand_as(normals).clone()
-    points = means.float().numpy()
-    index = cv2.flann_Index(np.ascontiguousarray(points[seen.numpy()]), EXACT_NEAREST)
-    nearest, _ = index.knnSearch(np.ascontiguousarray(points[~seen.numpy()]), 1)
-    filled = normals.clone()
-    filled[~seen] = normals[seen][torch.from_numpy(nearest[:, 0].astype(np.int64))]
-    return filled
 
 
 def layout_colours(
@@ -316,7 +244,7 @@ def layout_images(
     for camera, depth, alpha, premultiplied, lit in zip(
         views.cameras, views.depths, views.alphas, views.premultiplied, lit_at
     ):
-        normal, _, _ = _normal_map(camera, depth.cpu(), alpha.cpu())
+        normal, _, _ = normal_map(camera, depth.cpu(), alpha.cpu())
         z = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA)
         covered = alpha.cpu() >= SURFACE_ALPHA
         points = backproject(z, camera)[covered].float()
