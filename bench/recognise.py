@@ -42,7 +42,9 @@ settings they ran with and the run's stage times, step counts and metrics; ``--r
 instead of transferring when the settings match (and ``--reuse-older`` also when the saved settings predate
 some of today's settings, listed in the row).
 
-Writes bench/out/recognise/<tag>.json and a contact sheet per scene, bench/out/recognise/<tag>-<scene>.png
+Writes bench/out/recognise/<tag>.json (a tag can be filled one scene at a time: the scenes an earlier run under it
+measured with the same settings stay, and other settings are refused) and a contact sheet per scene,
+bench/out/recognise/<tag>-<scene>.png
 (rows: textures; columns: texture | projected | layout start | original | each result's held-out views), and every
 held-out view of the original, the layout starts and the results as PNGs under bench/out/recognise/<tag>/<scene>/
 (bench/quality_figure.py draws docs/quality.md's picture from them). The target the engine must meet: top 3 under
@@ -82,6 +84,7 @@ from recognise_scenes import (
 )
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
+from gt2gs_blender.core.atomic import atomic_write
 from gt2gs_blender.core.transfer.metrics import object_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, sketch
 from gt2gs_blender.core.transfer.plan import RunPlan, run_texture
@@ -508,6 +511,49 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
     return out
 
 
+def target_met(summary: dict[str, dict[str, dict]]) -> dict[str, bool]:
+    """Per "scene/variant" transfer: whether at least ``NEEDED`` textures rank top ``TOP`` under both measures."""
+    return {
+        f"{scene}/{variant}": s[f"top{TOP}_both"] >= NEEDED
+        for scene, variants in summary.items()
+        for variant, s in variants.items()
+        if is_transfer(variant)
+    }
+
+
+SAME_SETTINGS = ("presets", "seeds", "textures", "projected_heights", "size", "only_measure")
+"""What two runs under one tag share for their scenes to stand in one report (with the overrides and the measure)."""
+
+
+def settings_of(args: argparse.Namespace) -> dict:
+    """The settings a report's scenes were measured with, as its JSON holds them."""
+    settings = {key: getattr(args, key) for key in SAME_SETTINGS}
+    return json.loads(json.dumps({**settings, "overrides": args.overrides, "measure": measure.PARAMS}, default=str))
+
+
+def earlier_scenes(path: Path, args: argparse.Namespace) -> dict:
+    """The report at ``path`` cut to the scenes this run does not measure (empty when there is none), so a tag can be
+    filled one scene at a time; SystemExit naming the file when those scenes ran with other settings."""
+    if not path.is_file():
+        return {}
+    earlier = json.loads(path.read_text())
+    others = [scene for scene in earlier.get("scenes", {}) if scene not in args.scenes]
+    if not others:
+        return {}
+    then = {key: earlier["args"].get(key) for key in SAME_SETTINGS}
+    then.update({key: earlier.get(key) for key in ("overrides", "measure")})
+    differ = [key for key, value in settings_of(args).items() if then[key] != value]
+    if differ:
+        raise SystemExit(
+            f"{path} holds {', '.join(others)} measured with other {', '.join(differ)}: use another --tag, or remove "
+            "the file to start the tag again"
+        )
+    return {
+        "scenes": {scene: earlier["scenes"][scene] for scene in others},
+        "rows": [r for r in earlier["rows"] if r["scene"] in others],
+    }
+
+
 def is_transfer(variant: str) -> bool:
     calibration = variant.startswith("projected") or variant.endswith(
         ("sketch", "layout-start", "layout-target", "layout-surface")
@@ -537,7 +583,6 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
         "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean), "
         "accents (Lab a, b shift of the original's small, vivid features; mean)"
     )
-    met: dict[str, bool] = {}
     for scene, variants in summary.items():
         for variant, s in variants.items():
             preview = ""
@@ -552,8 +597,7 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
                 f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}{preview}"
             )
-            if is_transfer(variant):
-                met[f"{scene}/{variant}"] = s[f"top{TOP}_both"] >= NEEDED
+    met = target_met(summary)
     for key, ok in met.items():
         print(f"target (top {TOP} under both measures for >= {NEEDED} textures) {key}: {'MET' if ok else 'not met'}")
     if not met:
@@ -597,6 +641,8 @@ def main() -> None:
     if args.threads:
         torch.set_num_threads(args.threads)
 
+    out = output_name(args)
+    kept = earlier_scenes(OUT / f"{out}.json", args)
     start = time.perf_counter()
     stats = [measure.cached_texture_stats(p) for p in sorted(TEXTURES.iterdir()) if p.is_file()]
     print(f"texture statistics ({len(stats)} textures) in {time.perf_counter() - start:.1f} s", flush=True)
@@ -605,7 +651,11 @@ def main() -> None:
         scene_rows, scenes[name] = run_scene(name, args, stats)
         rows += scene_rows
     summary = summarise(rows)
-    met = print_table(rows, summary)
+    print_table(rows, summary)
+    if kept:
+        print(f"kept from {OUT / (out + '.json')}: {', '.join(kept['scenes'])} (an earlier run under this tag)")
+        rows, scenes = kept["rows"] + rows, {**kept["scenes"], **scenes}
+        summary = summarise(rows)
     report = {
         "tag": args.tag,
         "args": {k: v for k, v in vars(args).items() if k != "overrides"},
@@ -614,12 +664,11 @@ def main() -> None:
         "scenes": scenes,
         "rows": rows,
         "summary": summary,
-        "target": {"top": TOP, "needed": NEEDED, "met": met},
+        "target": {"top": TOP, "needed": NEEDED, "met": target_met(summary)},
         "load_average": os.getloadavg(),
     }
     OUT.mkdir(parents=True, exist_ok=True)
-    out = output_name(args)
-    (OUT / f"{out}.json").write_text(json.dumps(report, indent=1, default=str))
+    atomic_write(OUT / f"{out}.json", json.dumps(report, indent=1, default=str))
     print(f"wrote {OUT / (out + '.json')} and contact sheets {OUT / out}-<scene>.png")
 
 

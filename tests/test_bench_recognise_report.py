@@ -1,0 +1,94 @@
+"""bench/recognise.py's report under one tag filled one scene at a time: the earlier scenes stay when they ran with
+the same settings, and other settings are refused with the file named (a second scene once silently replaced the
+first's rows)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+
+import recognise
+import recognise_measure as measure
+
+
+def run_args(scenes: list[str], **overrides: object) -> argparse.Namespace:
+    """The arguments bench/recognise.py parses for ``scenes`` at `fast`, seed 0, with ``overrides`` (--set)."""
+    return argparse.Namespace(
+        scenes=scenes,
+        presets=["fast"],
+        seeds=[0],
+        textures=list(recognise.STRUCTURED),
+        projected_heights=[64, 128],
+        size=recognise.HELD_OUT_SIZE,
+        only_measure=False,
+        overrides=dict(overrides),
+    )
+
+
+def rows_for(scene: str, found: int) -> list[dict]:
+    """Six transfer rows for ``scene``, the first ``found`` textures ranked first under both measures."""
+    return [
+        {
+            "scene": scene,
+            "texture": texture,
+            "variant": "fast-s0",
+            "gram_rank": 1 if k < found else 7,
+            "gabor_rank": 1 if k < found else 7,
+            "content_ssim": 0.6 + 0.01 * k,
+            "colour_specks": 0.05,
+            "accent_shift": 20.0,
+        }
+        for k, texture in enumerate(recognise.STRUCTURED)
+    ]
+
+
+def write_report(path: Path, args: argparse.Namespace, rows: list[dict]) -> None:
+    """A report as bench/recognise.py writes it, for ``args`` and ``rows``."""
+    report = {
+        "tag": path.stem,
+        "args": {k: v for k, v in vars(args).items() if k != "overrides"},
+        "overrides": args.overrides,
+        "measure": measure.PARAMS,
+        "scenes": {scene: {"held_out": ["orbit_001"]} for scene in args.scenes},
+        "rows": rows,
+        "summary": recognise.summarise(rows),
+    }
+    path.write_text(json.dumps(report, default=str))
+
+
+def test_a_second_scene_under_the_tag_keeps_the_first(tmp_path: Path) -> None:
+    path = tmp_path / "s-base.json"
+    write_report(path, run_args(["guitar"]), rows_for("guitar", 2))
+    kept = recognise.earlier_scenes(path, run_args(["playbot"]))
+    assert list(kept["scenes"]) == ["guitar"]
+    assert [r["texture"] for r in kept["rows"]] == list(recognise.STRUCTURED)
+    summary = recognise.summarise(kept["rows"] + rows_for("playbot", 5))
+    assert summary["guitar"]["fast-s0"]["top3_both"] == 2
+    assert summary["playbot"]["fast-s0"]["top3_both"] == 5
+    assert recognise.target_met(summary) == {"guitar/fast-s0": False, "playbot/fast-s0": True}
+
+
+def test_the_same_scene_again_replaces_it(tmp_path: Path) -> None:
+    path = tmp_path / "s-base.json"
+    write_report(path, run_args(["guitar"]), rows_for("guitar", 2))
+    assert recognise.earlier_scenes(path, run_args(["guitar"])) == {}
+    assert recognise.earlier_scenes(path, run_args(["guitar"], keep_scene=0.6)) == {}
+    assert recognise.earlier_scenes(tmp_path / "none.json", run_args(["guitar"])) == {}
+
+
+def test_other_settings_under_the_tag_are_refused_with_the_file_named(tmp_path: Path) -> None:
+    path = tmp_path / "s-base.json"
+    write_report(path, run_args(["guitar"]), rows_for("guitar", 2))
+    with pytest.raises(SystemExit, match=r"s-base\.json holds guitar measured with other overrides: use another --tag"):
+        recognise.earlier_scenes(path, run_args(["playbot"], keep_scene=0.6))
+    other_seeds = run_args(["playbot"])
+    other_seeds.seeds = [1]
+    with pytest.raises(SystemExit, match="other seeds"):
+        recognise.earlier_scenes(path, other_seeds)
