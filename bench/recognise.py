@@ -659,6 +659,7 @@ def main() -> None:
     report = {
         "tag": args.tag,
         "args": {k: v for k, v in vars(args).items() if k != "overrides"},
+        "kept_scenes": list(kept.get("scenes", {})),  # from an earlier run under this tag; "args" are this run's
         "overrides": args.overrides,
         "measure": measure.PARAMS,
         "scenes": scenes,
