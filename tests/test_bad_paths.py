@@ -473,6 +473,32 @@ def test_a_command_stopped_by_a_signal_leaves_nothing_half_written(tmp_path, sig
     assert sorted(p.name for p in tmp_path.iterdir()) == ["scene.ply"]
 
 
+def test_a_signal_the_moment_a_temp_file_is_made_leaves_nothing(tmp_path, monkeypatch):
+    """A stop signal handled right after the temp file was created (where the SIGHUP test above once left its views
+    folder behind, a temp file in it): the temp file goes, and with it the folder made for the outputs."""
+    real_open = os.open
+
+    def open_then_stopped(*args, **kwargs):
+        real_open(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    out = tmp_path / "views"
+    monkeypatch.setattr(atomic.os, "open", open_then_stopped)
+    with pytest.raises(KeyboardInterrupt), atomic.all_or_nothing([out / "view.png"], new_folders=[out]):
+        atomic.atomic_write(out / "view.png", b"data")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_file_that_already_has_the_temp_files_name_is_not_removed(tmp_path, monkeypatch):
+    """O_EXCL refuses a temp name that is taken; that file is someone else's, so the failure leaves it."""
+    monkeypatch.setattr(atomic.secrets, "token_hex", lambda n: "0" * (2 * n))
+    taken = tmp_path / ".out.ply.00000000.tmp"
+    taken.write_bytes(b"theirs")
+    with pytest.raises(FileExistsError):
+        atomic.atomic_write(tmp_path / "out.ply", b"data")
+    assert taken.read_bytes() == b"theirs" and not (tmp_path / "out.ply").exists()
+
+
 def test_atomic_errors_name_the_target_never_the_temp_file(tmp_path):
     for target in (tmp_path / "no" / "out.ply", Path("/proc/gt2gs-out.ply")):
         with pytest.raises(OSError) as caught:

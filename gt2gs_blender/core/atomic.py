@@ -131,7 +131,8 @@ def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | 
     """Write ``chunks`` (buffers: bytes, memoryviews, numpy arrays; or one str as UTF-8) atomically.
 
     The temp file is created with ordinary umask permissions (a file it replaces keeps its own) and is removed
-    on any failure, so a failed or interrupted write leaves the old file (if any) untouched and nothing behind; an
+    on any failure, also a signal the moment after it was created, so a failed or interrupted write leaves the old
+    file (if any) untouched and nothing behind; an
     error names ``path``, never the temp file. Inside :func:`all_or_nothing` the rename waits for the block's end.
     """
     path = Path(path)
@@ -141,15 +142,16 @@ def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | 
         chunks = [chunks]
     tmp = path.with_name(f".{path.name[:48]}.{secrets.token_hex(4)}.tmp")
     try:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
         try:
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_BINARY", 0), 0o666)
             with os.fdopen(fd, "wb") as f:
                 for chunk in chunks:
                     f.write(chunk)
             _keep_mode(tmp, path)
             _finish(tmp, path)
-        except BaseException:
-            tmp.unlink(missing_ok=True)
+        except BaseException as exc:
+            if not isinstance(exc, FileExistsError):  # only os.open's O_EXCL raises it: that file is not ours
+                tmp.unlink(missing_ok=True)
             raise
     except OSError as exc:
         if exc.errno is None or exc.filename not in (None, str(tmp), os.fspath(path)):
