@@ -561,7 +561,7 @@ def is_transfer(variant: str) -> bool:
     return variant != "original" and not calibration
 
 
-def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
+def print_table(rows: list[dict], summary: dict) -> None:
     print(
         f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10} "
         f"{'specks':>6} {'accents':>7}   from preview gram / gabor (original's)"
@@ -602,7 +602,6 @@ def print_table(rows: list[dict], summary: dict) -> dict[str, bool]:
         print(f"target (top {TOP} under both measures for >= {NEEDED} textures) {key}: {'MET' if ok else 'not met'}")
     if not met:
         print("target: no transfer ran (--only-measure)")
-    return met
 
 
 def main() -> None:

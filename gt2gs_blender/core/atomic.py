@@ -132,8 +132,8 @@ def atomic_write(path: PathLike, chunks: Iterable[bytes | memoryview] | bytes | 
 
     The temp file is created with ordinary umask permissions (a file it replaces keeps its own) and is removed
     on any failure, also a signal the moment after it was created, so a failed or interrupted write leaves the old
-    file (if any) untouched and nothing behind; an
-    error names ``path``, never the temp file. Inside :func:`all_or_nothing` the rename waits for the block's end.
+    file (if any) untouched and nothing behind; an error names ``path``, never the temp file. Inside
+    :func:`all_or_nothing` the rename waits for the block's end.
     """
     path = Path(path)
     if isinstance(chunks, str):
