@@ -58,7 +58,7 @@ import json
 import os
 import sys
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -88,6 +88,7 @@ from gt2gs_blender.core.atomic import atomic_write
 from gt2gs_blender.core.transfer.metrics import object_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, sketch
 from gt2gs_blender.core.transfer.plan import RunPlan, run_texture
+from gt2gs_blender.core.transfer.views import ViewSet
 
 SHARED = ROOT.parent / "shared"
 TEXTURES = SHARED / "data" / "textures"
@@ -335,12 +336,41 @@ def ranks_label(r: dict, name: str) -> str:
 # ---------------------------------------------------------------------------------------------------
 # The benchmark
 # ---------------------------------------------------------------------------------------------------
-def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureStats]) -> tuple[list[dict], dict]:
-    base_config = preset(args.presets[0], **args.overrides)
-    bench = load_bench_scene(name, args.size)
-    rows: list[dict] = []
-    sheet: dict[str, list[np.ndarray]] = {}
+@dataclass
+class SceneRun:
+    """What the rows of every texture on one bench scene share: the scene, its original's renders and scores, and
+    each preset's run plan with the preview its results are compared with."""
 
+    name: str
+    args: argparse.Namespace
+    stats: list[measure.TextureStats]
+    bench: BenchScene
+    original_views: Views
+    original_stats: list[measure.ViewStats]
+    original: dict[str, Any]
+    """The original's structure distances to every texture."""
+    starts: dict[str, RunPlan]
+    references: dict[str, str]
+    """Per preset, the preview variant its results are compared with: its layout start, else its sketch."""
+    surfaces: dict[str, ViewSet]
+
+    @property
+    def alphas(self) -> list[np.ndarray]:
+        return [alpha for _, alpha in self.original_views]
+
+    @property
+    def folder(self) -> Path:
+        """Where the results are saved, whatever size measures them."""
+        return OUT / self.args.tag / self.name
+
+    @property
+    def pictures(self) -> Path:
+        return OUT / output_name(self.args) / self.name
+
+
+def scene_run(name: str, args: argparse.Namespace, stats: list[measure.TextureStats]) -> SceneRun:
+    """The bench scene ``name`` loaded, its original scored and each preset's run plan prepared."""
+    bench = load_bench_scene(name, args.size)
     start = time.perf_counter()
     original_views = held_out_renders(bench.scene, bench)
     original_stats = view_stats(original_views)
@@ -349,128 +379,162 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     first_texture = texture_path(args.textures[0])  # the plans differ only in the texture, swapped in per texture
     starts = {p: run_start(bench, run_config(p, args, bench, args.seeds[0]), first_texture) for p in args.presets}
     print(f"[{name}] run starts prepared in {time.perf_counter() - start:.1f} s", flush=True)
-    # the preview each preset's results are compared with: its layout start, else its screen-space sketch
     references = {
         p: (f"{p}-" if len(args.presets) > 1 else "") + ("layout-start" if r.config.layout else "sketch")
         for p, r in starts.items()
     }
-    alphas = [alpha for _, alpha in original_views]
     surfaces = {p: surface_views(bench, r.config.backend) for p, r in starts.items() if r.config.layout}
-    folder = OUT / args.tag / name  # the results, whatever size measures them
-    pictures = OUT / output_name(args) / name
-    write_pictures(pictures, "original", original_views)
+    return SceneRun(name, args, stats, bench, original_views, original_stats, original, starts, references, surfaces)
+
+
+def measured_row(run: SceneRun, texture: str, variant: str, views: Views, seconds: float | None = None) -> dict:
+    """A row for ``views`` of ``texture``: structure ranks and the scene side against the original."""
+    p = row(run.name, texture, variant, score(view_stats(views), run.stats), seconds)
+    p.update(scene_side(views, run.original_views))
+    return p
+
+
+def calibration_rows(
+    run: SceneRun, texture: str, tiles: list[np.ndarray], previews: dict[str, list[measure.ViewStats]]
+) -> list[dict]:
+    """The texture shown to the measure without a transfer: projected in screen space at each height, and for each
+    preset its preview (the layout start, the run's target and the texture alone on the exact surface, or the
+    sketch); fills ``previews`` (variant -> view statistics) and ``tiles``."""
+    rows = []
+    path = texture_path(texture)
+    base_config = preset(run.args.presets[0], **run.args.overrides)
+    for height in run.args.projected_heights:
+        variant = f"projected-{height}"
+        views = projected(run.bench, path, height, base_config, run.alphas)
+        previews[variant] = view_stats(views)
+        rows.append(measured_row(run, texture, variant, views))
+        tiles.append(tile(views[0][0], ranks_label(rows[-1], f"proj{height}")))
+    for preset_name, plan in run.starts.items():
+        t0 = time.perf_counter()
+        variant = run.references[preset_name]
+        if not plan.config.layout:
+            views = sketched(plan, run.bench, path, run.alphas)
+            previews[variant] = view_stats(views)
+            rows.append(measured_row(run, texture, variant, views, time.perf_counter() - t0))
+            tiles.append(tile(views[0][0], ranks_label(rows[-1], "sketch")))
+            continue
+        views = held_out_renders(layout_start(plan, path), run.bench)
+        previews[variant] = view_stats(views)
+        rows.append(measured_row(run, texture, variant, views, time.perf_counter() - t0))
+        tiles.append(tile(views[0][0], ranks_label(rows[-1], variant.removesuffix("-start"))))
+        write_pictures(run.pictures, f"{texture}-{variant}", views)
+        for kind, shaded in (("target", True), ("surface", False)):
+            views = layout_surface(plan, run.bench, path, shaded, run.surfaces[preset_name])
+            rows.append(measured_row(run, texture, variant.removesuffix("-start") + f"-{kind}", views))
+            tiles.append(tile(views[0][0], ranks_label(rows[-1], kind)))
+    return rows
+
+
+def saved_or_transferred(
+    run: SceneRun, texture: str, config: TransferConfig, variant: str
+) -> tuple[GaussianScene, float, Any, bool, list[str]]:
+    """The result of ``texture`` under ``config``: read back when ``--reuse`` finds one saved with the same settings,
+    else transferred and saved. Returns it, its transfer's seconds, its feature weights, whether it was reused and
+    the settings its saved copy predates."""
+    saved = run.folder / f"{texture}-{variant}.ply"
+    settings = json.dumps(config.to_dict(), sort_keys=True, default=str)
+    if run.args.reuse and saved.is_file() and saved.with_suffix(".json").is_file():
+        kept = json.loads(saved.with_suffix(".json").read_text())
+        ok, missing = reusable(json.loads(kept["config"]), json.loads(settings), run.args.reuse_older)
+        if ok:
+            note = f" (saved before: {', '.join(missing)})" if missing else ""
+            print(f"[{run.name}] {texture} {variant}: reusing {saved}{note}", flush=True)
+            return read_scene(saved), kept["seconds"], kept["features"], True, missing
+        print(f"[{run.name}] {texture} {variant}: {saved} has other settings, transferring", flush=True)
+    t0 = time.perf_counter()
+    result = transfer(run.bench.scene, texture_path(texture), run.bench.transfer_views, config)
+    seconds = time.perf_counter() - t0
+    features = result.report.get("weights")
+    run.folder.mkdir(parents=True, exist_ok=True)
+    write_ply(saved, result.scene)
+    kept = {"config": settings, "seconds": seconds, "features": features}
+    kept.update({key: result.report.get(key) for key in ("stage_seconds", "stylise", "metrics")})
+    saved.with_suffix(".json").write_text(json.dumps(kept, default=str))
+    return result.scene, seconds, features, False, []
+
+
+def result_row(
+    run: SceneRun,
+    texture: str,
+    preset_name: str,
+    seed: int,
+    previews: dict[str, list[measure.ViewStats]],
+    original_row: dict,
+    tiles: list[np.ndarray],
+) -> dict:
+    """The row of one transfer of ``texture`` (``preset_name``, ``seed``): structure ranks, the scene side and the
+    distance from its preview beside the original's; adds its held-out views to ``tiles``."""
+    variant = f"{preset_name}-s{seed}"
+    reference = run.references[preset_name]
+    config = run_config(preset_name, run.args, run.bench, seed)
+    result_scene, seconds, features, reused, missing = saved_or_transferred(run, texture, config, variant)
+    views = held_out_renders(result_scene, run.bench)
+    result_stats = view_stats(views)
+    t = row(run.name, texture, variant, score(result_stats, run.stats), seconds)
+    t["features"] = features
+    t.update(scene_side(views, run.original_views))
+    t.update(preview_fields(from_preview(result_stats, previews[reference]), reference, run.starts[preset_name]))
+    scale = (
+        {m: original_row[f"preview_{m}"] for m in MEASURES}
+        if reference == run.references[run.args.presets[0]]
+        else from_preview(run.original_stats, previews[reference])
+    )
+    t.update({f"original_preview_{m}": v for m, v in scale.items()})
+    t["reused"] = reused
+    if missing:
+        t["reused_settings_missing"] = missing
+    print(
+        f"[{run.name}] {texture} {variant}: {seconds:.0f} s, "
+        f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}, from {reference}: "
+        f"gram {t['preview_gram']:.3f} gabor {t['preview_gabor']:.3f} "
+        f"(original {t['original_preview_gram']:.3f} / {t['original_preview_gabor']:.3f})",
+        flush=True,
+    )
+    for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
+        tiles.append(tile(rgb, ranks_label(t, f"{variant} v{k}") if k == 0 else f"{variant} v{k}"))
+    write_pictures(run.pictures, f"{texture}-{variant}", views)
+    return t
+
+
+def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureStats]) -> tuple[list[dict], dict]:
+    """Every row of one scene (the calibration, then each texture's transfers unless ``--only-measure``), its
+    contact sheet written; returns the rows and the scene's entry of the report."""
+    run = scene_run(name, args, stats)
+    write_pictures(run.pictures, "original", run.original_views)
+    rows: list[dict] = []
+    sheet: dict[str, list[np.ndarray]] = {}
+    first = run.references[args.presets[0]]
     for texture in args.textures:
         image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
-        sheet[texture] = [tile(image, texture)]
+        tiles = sheet[texture] = [tile(image, texture)]
         previews: dict[str, list[measure.ViewStats]] = {}
-        r = row(name, texture, "original", original)
-        r.update(scene_side(original_views, original_views))  # content 1: the original is the scene
-        for height in args.projected_heights:
-            views = projected(bench, texture_path(texture), height, base_config, alphas)
-            variant = f"projected-{height}"
-            previews[variant] = view_stats(views)
-            p = row(name, texture, variant, score(previews[variant], stats))
-            p.update(scene_side(views, original_views))
-            rows.append(p)
-            sheet[texture].append(tile(views[0][0], ranks_label(p, f"proj{height}")))
-        for preset_name, run in starts.items():
-            t0 = time.perf_counter()
-            variant = references[preset_name]
-            if not run.config.layout:
-                views = sketched(run, bench, texture_path(texture), alphas)
-                previews[variant] = view_stats(views)
-                p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
-                p.update(scene_side(views, original_views))
-                rows.append(p)
-                sheet[texture].append(tile(views[0][0], ranks_label(p, "sketch")))
-                continue
-            views = held_out_renders(layout_start(run, texture_path(texture)), bench)
-            previews[variant] = view_stats(views)
-            p = row(name, texture, variant, score(previews[variant], stats), time.perf_counter() - t0)
-            p.update(scene_side(views, original_views))
-            rows.append(p)
-            sheet[texture].append(tile(views[0][0], ranks_label(p, variant.removesuffix("-start"))))
-            write_pictures(pictures, f"{texture}-{variant}", views)
-            for kind, shaded in (("target", True), ("surface", False)):
-                views = layout_surface(run, bench, texture_path(texture), shaded, surfaces[preset_name])
-                p = row(name, texture, variant.removesuffix("-start") + f"-{kind}", score(view_stats(views), stats))
-                p.update(scene_side(views, original_views))
-                rows.append(p)
-                sheet[texture].append(tile(views[0][0], ranks_label(p, kind)))
-        first = references[args.presets[0]]
-        r.update(preview_fields(from_preview(original_stats, previews[first]), first, starts[args.presets[0]]))
+        rows += calibration_rows(run, texture, tiles, previews)
+        r = row(name, texture, "original", run.original)
+        r.update(scene_side(run.original_views, run.original_views))  # content 1: the original is the scene
+        r.update(preview_fields(from_preview(run.original_stats, previews[first]), first, run.starts[args.presets[0]]))
         rows.append(r)
-        sheet[texture].append(tile(original_views[0][0], ranks_label(r, "original")))
+        tiles.append(tile(run.original_views[0][0], ranks_label(r, "original")))
         if args.only_measure:
             continue
         for preset_name in args.presets:
-            reference = references[preset_name]
             for seed in args.seeds:
-                config = run_config(preset_name, args, bench, seed)
-                variant = f"{preset_name}-s{seed}"
-                saved = folder / f"{texture}-{variant}.ply"
-                settings = json.dumps(config.to_dict(), sort_keys=True, default=str)
-                result_scene, missing, reused = None, [], False
-                if args.reuse and saved.is_file() and saved.with_suffix(".json").is_file():
-                    kept = json.loads(saved.with_suffix(".json").read_text())
-                    ok, missing = reusable(json.loads(kept["config"]), json.loads(settings), args.reuse_older)
-                    if ok:
-                        result_scene, seconds, features = read_scene(saved), kept["seconds"], kept["features"]
-                        reused = True
-                        note = f" (saved before: {', '.join(missing)})" if missing else ""
-                        print(f"[{name}] {texture} {variant}: reusing {saved}{note}", flush=True)
-                    else:
-                        print(f"[{name}] {texture} {variant}: {saved} has other settings, transferring", flush=True)
-                if result_scene is None:
-                    missing = []
-                    t0 = time.perf_counter()
-                    result = transfer(bench.scene, texture_path(texture), bench.transfer_views, config)
-                    seconds = time.perf_counter() - t0
-                    result_scene, features = result.scene, result.report.get("weights")
-                    folder.mkdir(parents=True, exist_ok=True)
-                    write_ply(saved, result_scene)
-                    kept = {"config": settings, "seconds": seconds, "features": features}
-                    kept.update({key: result.report.get(key) for key in ("stage_seconds", "stylise", "metrics")})
-                    saved.with_suffix(".json").write_text(json.dumps(kept, default=str))
-                views = held_out_renders(result_scene, bench)
-                result_stats = view_stats(views)
-                t = row(name, texture, variant, score(result_stats, stats), seconds)
-                t["features"] = features
-                t.update(scene_side(views, original_views))
-                t.update(
-                    preview_fields(from_preview(result_stats, previews[reference]), reference, starts[preset_name])
-                )
-                scale = (
-                    {m: r[f"preview_{m}"] for m in MEASURES}
-                    if reference == first
-                    else from_preview(original_stats, previews[reference])
-                )
-                t.update({f"original_preview_{m}": v for m, v in scale.items()})
-                t["reused"] = reused
-                if missing:
-                    t["reused_settings_missing"] = missing
-                rows.append(t)
-                print(
-                    f"[{name}] {texture} {variant}: {seconds:.0f} s, "
-                    f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}, from {reference}: "
-                    f"gram {t['preview_gram']:.3f} gabor {t['preview_gabor']:.3f} "
-                    f"(original {t['original_preview_gram']:.3f} / {t['original_preview_gabor']:.3f})",
-                    flush=True,
-                )
-                for k, (rgb, _) in enumerate(views[:SHEET_VIEWS]):
-                    sheet[texture].append(tile(rgb, ranks_label(t, f"{variant} v{k}") if k == 0 else f"{variant} v{k}"))
-                write_pictures(pictures, f"{texture}-{variant}", views)
+                rows.append(result_row(run, texture, preset_name, seed, previews, r, tiles))
     write_sheet(OUT / f"{output_name(args)}-{name}.png", sheet)
     return rows, {
-        "held_out": [c.name for c in bench.held_out],
-        "background": bench.background,
+        "held_out": [c.name for c in run.bench.held_out],
+        "background": run.bench.background,
         "preview": {
             p: {
-                "reference": references[p],
+                "reference": run.references[p],
                 "kind": "layout_start" if r.config.layout else "orientation_preview",
                 "texture_height": r.config.texture_height,
             }
-            for p, r in starts.items()
+            for p, r in run.starts.items()
         },
     }
 
