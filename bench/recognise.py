@@ -387,9 +387,17 @@ def scene_run(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
     return SceneRun(name, args, stats, bench, original_views, original_stats, original, starts, references, surfaces)
 
 
-def measured_row(run: SceneRun, texture: str, variant: str, views: Views, seconds: float | None = None) -> dict:
-    """A row for ``views`` of ``texture``: structure ranks and the scene side against the original."""
-    p = row(run.name, texture, variant, score(view_stats(views), run.stats), seconds)
+def measured_row(
+    run: SceneRun,
+    texture: str,
+    variant: str,
+    views: Views,
+    stats: list[measure.ViewStats],
+    seconds: float | None = None,
+) -> dict:
+    """A row for ``views`` of ``texture`` (``stats``: their window statistics): structure ranks and the scene side
+    against the original."""
+    p = row(run.name, texture, variant, score(stats, run.stats), seconds)
     p.update(scene_side(views, run.original_views))
     return p
 
@@ -407,7 +415,7 @@ def calibration_rows(
         variant = f"projected-{height}"
         views = projected(run.bench, path, height, base_config, run.alphas)
         previews[variant] = view_stats(views)
-        rows.append(measured_row(run, texture, variant, views))
+        rows.append(measured_row(run, texture, variant, views, previews[variant]))
         tiles.append(tile(views[0][0], ranks_label(rows[-1], f"proj{height}")))
     for preset_name, plan in run.starts.items():
         t0 = time.perf_counter()
@@ -415,17 +423,18 @@ def calibration_rows(
         if not plan.config.layout:
             views = sketched(plan, run.bench, path, run.alphas)
             previews[variant] = view_stats(views)
-            rows.append(measured_row(run, texture, variant, views, time.perf_counter() - t0))
+            rows.append(measured_row(run, texture, variant, views, previews[variant], time.perf_counter() - t0))
             tiles.append(tile(views[0][0], ranks_label(rows[-1], "sketch")))
             continue
         views = held_out_renders(layout_start(plan, path), run.bench)
         previews[variant] = view_stats(views)
-        rows.append(measured_row(run, texture, variant, views, time.perf_counter() - t0))
+        rows.append(measured_row(run, texture, variant, views, previews[variant], time.perf_counter() - t0))
         tiles.append(tile(views[0][0], ranks_label(rows[-1], variant.removesuffix("-start"))))
         write_pictures(run.pictures, f"{texture}-{variant}", views)
         for kind, shaded in (("target", True), ("surface", False)):
             views = layout_surface(plan, run.bench, path, shaded, run.surfaces[preset_name])
-            rows.append(measured_row(run, texture, variant.removesuffix("-start") + f"-{kind}", views))
+            kind_variant = variant.removesuffix("-start") + f"-{kind}"
+            rows.append(measured_row(run, texture, kind_variant, views, view_stats(views)))
             tiles.append(tile(views[0][0], ranks_label(rows[-1], kind)))
     return rows
 
