@@ -3,7 +3,7 @@
 Before the optimisation (``split_first``), or after it on the scene's own splats (faster: the time grows
 with their count), splats coarser than ``split_size`` of a repeat are split in two along each of their two
 largest axes that is (2 x 2 in their plane; 1 x 2 along a needle, which grows rounder instead of thinner;
-children at 0.8 sigma, 0.6 of the scale, same opacity: the parent's second moment), at most
+children drawn to look like their parent: :func:`child_opacity`), at most
 ``SPLIT_PASSES`` times and within ``split_budget`` times the splats, so a plank edge can lie between
 splats. Each child takes the layout's colour at its place (and, after the optimisation, what it changed
 on its parent).
@@ -25,10 +25,12 @@ from .layout import LayoutFrame, layout_colours, splat_normals
 from .shade import under_scene
 from .views import ViewSet
 
-SPLIT_OFFSET = 0.8
-"""Children sit at +-0.8 sigma along each split axis ..."""
+SPLIT_OFFSET = 0.6
+"""Children sit at +-0.6 sigma along each split axis ..."""
 SPLIT_SHRINK = 0.6
-"""... with 0.6 of its scale there: 0.8^2 + 0.6^2 = 1 keeps the parent's second moment."""
+"""... with 0.6 of its scale there. Placed at 0.8 sigma, which keeps the parent's second moment, their alpha
+had two humps and 1.2x the parent's opacity per axis (the guitar's render kept SSIM 0.85 of itself after the
+split, 0.89 now); at 0.6 sigma with :func:`child_opacity` they come closest to their parent's shape."""
 SPLIT_PASSES = 3
 """At most three splits (up to 64 children) per splat."""
 
@@ -63,8 +65,20 @@ def split_coarse(scene: GaussianScene, max_sigma: float, max_count: int) -> tupl
     return scene, source
 
 
+def child_opacity(offset: float = SPLIT_OFFSET, shrink: float = SPLIT_SHRINK) -> float:
+    """The share of its parent's opacity each child keeps per axis split: the least-squares fit of two children
+    (at +-``offset`` sigma, ``shrink`` of the scale) to the parent's alpha where splats are faint and their
+    alphas add, in closed form (Gaussian products). A 2 x 2 split takes it twice (the children are separable);
+    for an opaque parent, whose children's alphas saturate, the best share is up to 10 % higher, and this one
+    draws within 0.025 of its error (relative L2)."""
+    shrink2 = shrink * shrink
+    overlap = math.sqrt(2.0 / (1.0 + shrink2)) * math.exp(-offset * offset / (2.0 * (1.0 + shrink2)))
+    return overlap / (1.0 + math.exp(-offset * offset / shrink2))
+
+
 def _split_along(parents: GaussianScene, n_axes: int) -> GaussianScene:
-    """2^n_axes children per parent, halving it along its ``n_axes`` largest axes (module notes)."""
+    """2^n_axes children per parent, halving it along its ``n_axes`` largest axes, each with ``child_opacity``
+    of its opacity per axis (module notes)."""
     scales = parents.scales.detach()
     rot = quats_to_rotmats(parents.rotations.detach())
     order = scales.argsort(dim=1, descending=True, stable=True)  # equal axes: by index, on every device
@@ -73,10 +87,19 @@ def _split_along(parents: GaussianScene, n_axes: int) -> GaussianScene:
     shrink = torch.zeros_like(scales)
     for k in range(n_axes):
         shrink[rows, order[:, k]] = math.log(SPLIT_SHRINK)
+    share = child_opacity() ** n_axes
+    # logit(share * sigmoid(l)) = log(share) - log(1 - share + e^-l), finite for every finite l
+    logits = math.log(share) - torch.logaddexp(
+        torch.full_like(parents.opacity_logits, math.log1p(-share)), -parents.opacity_logits
+    )
     kids = []
     for signs in itertools.product((-1, 1), repeat=n_axes):
         offset = SPLIT_OFFSET * sum(sign * axis for sign, axis in zip(signs, axes, strict=True))
-        kids.append(replace(parents, means=parents.means + offset, log_scales=parents.log_scales + shrink))
+        kids.append(
+            replace(
+                parents, means=parents.means + offset, log_scales=parents.log_scales + shrink, opacity_logits=logits
+            )
+        )
     return concat(kids)
 
 
