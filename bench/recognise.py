@@ -107,6 +107,7 @@ SUMMED = (
     "content_ssim",
     "colour_specks",
     "accent_shift",
+    "splats",
 )
 """The row fields a summary averages per scene and variant."""
 Views = list[tuple[np.ndarray, np.ndarray]]
@@ -486,6 +487,7 @@ def result_row(
     result_stats = view_stats(views)
     t = row(run.name, texture, variant, score(result_stats, run.stats), seconds)
     t["features"] = features
+    t["splats"] = len(result_scene)  # what the saved file holds: the split's cost beside its seconds
     t.update(scene_side(views, run.original_views))
     t.update(preview_fields(from_preview(result_stats, previews[reference]), reference, run.starts[preset_name]))
     scale = (
@@ -498,7 +500,7 @@ def result_row(
     if missing:
         t["reused_settings_missing"] = missing
     print(
-        f"[{run.name}] {texture} {variant}: {seconds:.0f} s, "
+        f"[{run.name}] {texture} {variant}: {seconds:.0f} s, {t['splats']:,} splats, "
         f"ranks gram {t['gram_rank']} gabor {t['gabor_rank']}, from {reference}: "
         f"gram {t['preview_gram']:.3f} gabor {t['preview_gabor']:.3f} "
         f"(original {t['original_preview_gram']:.3f} / {t['original_preview_gabor']:.3f})",
@@ -658,9 +660,9 @@ def print_table(rows: list[dict], summary: dict) -> None:
     )
     for scene, variants in summary.items():
         for variant, s in variants.items():
-            preview = ""
+            tail = f"   splats {s['mean_splats']:,.0f}" if "mean_splats" in s else ""
             if "mean_original_preview_gram" in s:
-                preview = (
+                tail += (
                     f"   from preview {s['mean_preview_gram']:.3f} / {s['mean_preview_gabor']:.3f} "
                     f"(original {s['mean_original_preview_gram']:.3f} / {s['mean_original_preview_gabor']:.3f})"
                 )
@@ -668,7 +670,7 @@ def print_table(rows: list[dict], summary: dict) -> None:
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
-                f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}{preview}"
+                f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}{tail}"
             )
     met = target_met(summary)
     for key, ok in met.items():

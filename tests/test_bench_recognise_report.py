@@ -92,3 +92,19 @@ def test_other_settings_under_the_tag_are_refused_with_the_file_named(tmp_path: 
     other_seeds.seeds = [1]
     with pytest.raises(SystemExit, match="other seeds"):
         recognise.earlier_scenes(path, other_seeds)
+
+
+def test_the_summary_gives_the_saved_files_splats_and_older_reports_still_print(capsys) -> None:
+    rows = rows_for("donut", 1)
+    for k, r in enumerate(rows):
+        r.update(seconds=10.0, splats=300_000 + 1_000 * k)
+    older = rows_for("guitar", 0)  # measured before rows carried their splat count
+    for r in older:
+        r["seconds"] = 10.0
+    summary = recognise.summarise(rows + older)
+    assert summary["donut"]["fast-s0"]["mean_splats"] == pytest.approx(302_500)
+    assert "mean_splats" not in summary["guitar"]["fast-s0"]
+    recognise.print_table(rows + older, summary)
+    lines = capsys.readouterr().out.splitlines()
+    assert any(line.startswith("  donut") and line.endswith("splats 302,500") for line in lines)
+    assert any(line.startswith("  guitar") and "splats" not in line for line in lines)
