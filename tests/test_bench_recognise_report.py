@@ -94,7 +94,9 @@ def test_other_settings_under_the_tag_are_refused_with_the_file_named(tmp_path: 
         recognise.earlier_scenes(path, other_seeds)
 
 
-def test_the_summary_gives_the_saved_files_splats_and_older_reports_still_print(capsys) -> None:
+def test_the_summary_gives_the_saved_files_splats_and_older_reports_still_print(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
     rows = rows_for("donut", 1)
     for k, r in enumerate(rows):
         r.update(seconds=10.0, splats=300_000 + 1_000 * k)
