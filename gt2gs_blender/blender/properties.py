@@ -43,9 +43,12 @@ CHOICE_HELP: dict[str, dict[str, str]] = {
         "auto": "Estimated from the splats",
     },
     "view_kind": {
+        "auto": "Inside when the splats' sizes say the capture was taken from within it (a room), else Orbit",
         "orbit": "A ring all round the object (an object seen from all sides)",
         "front": "A short arc on the side the capture was taken from, read from its splats' sizes, else on "
         "Blender's front (a capture seen from the front, given without its cameras)",
+        "inside": "Standing where the cameras stood, read from the splats' sizes (else in the middle), looking out "
+        "all round (a room seen from within)",
     },
     "layout_projection": {
         "auto": f"View when every view looks within {FORWARD_SPREAD_DEG:g}° of the views' mean direction, else Box",

@@ -173,6 +173,8 @@ def gpu_preset_check(context: bpy.types.Context, preset: str) -> None:
 def first_view_label(context: bpy.types.Context) -> str:
     """Which view is the first one, the view the texture's angle is measured in."""
     settings = context.scene.gt2gs
+    if settings.view_source == "AUTO" and settings.view_kind == "inside":
+        return "automatic view 1, from inside, looking as Blender's Front view does (towards +Y), a little down"
     if settings.view_source == "AUTO":
         return "automatic view 1, in front (Blender's Front view, from -Y), 20° above"
     if settings.view_source == "CAMERAS_JSON":

@@ -645,7 +645,8 @@ def test_automatic_settings_show_the_value_a_run_uses():
 
 def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
     """What the automatic Projection and Texture Moves Splats follow, from each source of views: automatic
-    views ring the object unless one or Front; scene cameras and a cameras.json count by where they look."""
+    views ring the object (or look out from inside it) unless one or Front; scene cameras and a cameras.json
+    count by where they look."""
     from mathutils import Euler
 
     from gt2gs_blender.blender.views import views_from_front
@@ -658,6 +659,8 @@ def test_the_panel_tells_whether_the_views_look_from_the_front(fresh, tmp_path):
     assert views_from_front(settings, scene) is True
     settings.n_views, settings.view_kind = 16, "front"
     assert views_from_front(settings, scene) is True  # the front arc looks from one side
+    settings.view_kind = "inside"
+    assert views_from_front(settings, scene) is False  # views from inside a room look out all round
     settings.view_kind = "orbit"
     settings.view_source = "SCENE_CAMERAS"
     assert views_from_front(settings, scene) is None  # no camera yet
@@ -850,6 +853,9 @@ def test_orientation_preview_names_the_first_view_and_the_result_s_size(blob):
     region_start = int(re.search(r"about ([\d,]+) splats", transfer_run.preview_splats_text())[1].replace(",", ""))
     assert count < region_start < start
     scene = bpy.context.scene
+    scene.gt2gs.view_kind = "inside"
+    assert transfer_run.first_view_label(bpy.context).startswith("automatic view 1, from inside, looking as Blender")
+    scene.gt2gs.view_kind = "auto"
     for name in ("B cam", "A cam"):
         scene.collection.objects.link(bpy.data.objects.new(name, bpy.data.cameras.new(name)))
     scene.gt2gs.view_source = "SCENE_CAMERAS"

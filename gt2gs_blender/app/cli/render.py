@@ -17,7 +17,7 @@ from ...core.atomic import Named, all_or_nothing, atomic_write, check_outputs, r
 from ...core.cameras.camera import Camera
 from ...core.cameras.cameras_json import save_cameras_json
 from ...core.cameras.files import load_views
-from ...core.cameras.generate import auto_views
+from ...core.cameras.generate import VIEW_KINDS, auto_views
 from ...core.device import resolve_device
 from ...core.errors import GT2GSError, InputFileError
 from ...core.progress import Progress
@@ -65,10 +65,12 @@ def add_render_command(commands: Any, debug: argparse.ArgumentParser) -> None:
     p.add_argument("--scale", type=positive_float, metavar="F", help="resize --cameras images by F (e.g. 0.25)")
     p.add_argument(
         "--kind",
-        choices=("orbit", "arc", "front"),
-        default="orbit",
-        help="generated views: a full ring, a 60° forward-facing arc on -y, or a 30° arc on the side the capture "
-        "was taken from, read from its splats' sizes where they tell (else the arc) (default: orbit)",
+        choices=VIEW_KINDS,
+        default="auto",
+        help="generated views: inside where the splats' sizes say the capture was taken from within it, else orbit "
+        "(auto); a full ring; a 60° forward-facing arc on -y; a 30° arc on the side the capture was taken from, "
+        "read from its splats' sizes where they tell (else the arc); or looking out all round from where the "
+        "cameras stood (inside, a room) (default: auto)",
     )
     p.add_argument(
         "--up",

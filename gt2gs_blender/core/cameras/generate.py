@@ -1,5 +1,6 @@
 """Views fitted to a scene when no cameras are given: a ring all round it, an arc on Blender's front, or an arc
-where the capture's cameras stood, at the distance that frames it."""
+where the capture's cameras stood, at the distance that frames it; or, for a capture seen from inside (a room), a
+ring looking out from where its cameras stood."""
 
 from __future__ import annotations
 
@@ -13,12 +14,20 @@ from ..scene.gaussians import GaussianScene
 from .axes import axis_vector, unit_vector
 from .camera import Camera
 from .cut import CUT_SAMPLE
-from .poses import arc_views, orbit_views
+from .poses import arc_views, orbit_views, outward_views
 from .up import CONVENTION, front_for, scene_up
 from .viewpoint import fitted_viewpoint
 
-VIEW_KINDS = ("auto", "orbit", "arc", "front")
-"""What :func:`auto_views` draws: a ring all round, an arc on Blender's front, an arc where the cameras stood."""
+VIEW_KINDS = ("auto", "orbit", "arc", "front", "inside")
+"""What :func:`auto_views` draws: inside where the splats say the cameras stood within the capture, else a ring
+(auto); a ring all round; an arc on Blender's front; an arc where the cameras stood; a ring looking out."""
+RING_FOV_DEG = 50.0
+"""Views from a ring or an arc see this wide."""
+INSIDE_PITCH_DEG = 10.0
+"""Views from inside look this far down: a room's walls and the floor before them (a person holds a camera so)."""
+INSIDE_FOV_DEG = 75.0
+"""Views from inside see this wide (a phone's main camera): at 50° a room's upper walls, 1 m above the eye and 2 m
+away, lie out of every view."""
 LEVEL_DEG = 45.0
 """Front views keep the asked up unless the cameras looked within this angle of it (a capture lying flat: the
 thinnest axis of a plant before its wall is the depth the cameras looked along)."""
@@ -79,8 +88,8 @@ def auto_views(
     *,
     width: int = 256,
     height: int = 256,
-    kind: str = "auto",
-    fov_deg: float = 50.0,
+    kind: str = "orbit",
+    fov_deg: float | None = None,
     elevation_deg: float = 20.0,
     up: Sequence[float] | str = (0.0, 0.0, 1.0),
     quantile: float = 0.98,
@@ -91,23 +100,35 @@ def auto_views(
     The Gaussians' robust bounds (``scene.bounds(quantile)``, ignoring floaters) give a box; the
     camera distance is the smallest at which all eight box corners project inside every image,
     times ``margin`` (1 = corners may touch the border). A box, not its bounding sphere, so flat or
-    long objects fill the frame. ``kind``: "orbit" (a full ring), "arc" (a 60 degree
+    long objects fill the frame. ``fov_deg``: the views' horizontal field of view (None: ``RING_FOV_DEG``,
+    from inside ``INSIDE_FOV_DEG``). ``kind``: "orbit" (a full ring), "arc" (a 60 degree
     forward-facing arc on the -y side, Blender's front), "front" (a 30 degree arc on the side the
-    capture's cameras stood, :func:`front_arc`; "arc" where its splats do not say) or "auto" (= orbit:
-    a lone object has no known front). ``up`` is a vector (world +z, Blender's convention, by default),
+    capture's cameras stood, :func:`front_arc`; "arc" where its splats do not say), "inside" (a ring
+    looking out, ``INSIDE_PITCH_DEG`` down, from where a room's cameras stood, :func:`inside_point`; the first
+    looks as the orbit's first does, the way Blender's Front view looks) or
+    "auto" ("inside" where the splats say the cameras stood within the capture, else "orbit": a lone
+    object has no known front). ``up`` is a vector (world +z, Blender's convention, by default),
     an axis name (:func:`axis_vector`) or "auto" for :func:`estimate_up_axis`.
     """
     if kind not in VIEW_KINDS:
         raise ValueError(f"kind must be one of {', '.join(VIEW_KINDS)}, got {kind!r}")
     if margin <= 0:
         raise ValueError(f"margin must be positive, got {margin}")
-    lo, hi = _framed_box(scene, quantile)
-    center = (lo + hi) / 2.0
-    sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
     if up == "auto":
         up = scene_up(scene, quantile)
     elif isinstance(up, str):
         up = axis_vector(up)
+    kind = chosen_kind(scene, kind)
+    if kind == "inside":
+        fov_deg = INSIDE_FOV_DEG if fov_deg is None else fov_deg
+        look = dict(
+            width=width, height=height, fov_deg=fov_deg, pitch_deg=INSIDE_PITCH_DEG, up=up, first=-front_for(up)
+        )
+        return outward_views(inside_point(scene, quantile), n, **look)
+    fov_deg = RING_FOV_DEG if fov_deg is None else fov_deg
+    lo, hi = _framed_box(scene, quantile)
+    center = (lo + hi) / 2.0
+    sphere_radius = max(float(np.linalg.norm(hi - lo)) / 2.0, 1e-6)
     ring = dict(width=width, height=height, fov_deg=fov_deg, elevation_deg=elevation_deg, up=up, front=front_for(up))
     corners = box_corners(lo, hi)
     nearest = sphere_radius
@@ -125,6 +146,26 @@ def auto_views(
 
     enclosing = sphere_radius / math.sin(min(fov_x, fov_y) / 2.0)  # the sphere fits: so does the box
     return views(_fitting_radius(views, corners, nearest, enclosing) * margin)
+
+
+def chosen_kind(scene: GaussianScene, kind: str) -> str:
+    """The views ``kind`` draws on ``scene``: "auto" is "inside" where the splats' sizes say the cameras stood
+    within the capture (:attr:`Viewpoint.inside`), else "orbit"; any other kind is itself."""
+    if kind != "auto":
+        return kind
+    viewpoint = fitted_viewpoint(scene)
+    return "inside" if viewpoint is not None and viewpoint.inside else "orbit"
+
+
+def inside_point(scene: GaussianScene, quantile: float = 0.98) -> np.ndarray:
+    """Where views from inside stand: where the capture's cameras stood when its splats' sizes say they stood
+    within it (:attr:`Viewpoint.inside`), else the middle of its robust bounds (a room asked to be seen from
+    inside whose sizes do not tell)."""
+    viewpoint = fitted_viewpoint(scene)
+    if viewpoint is not None and viewpoint.inside:
+        return np.array(viewpoint.point)
+    lo, hi = (b.detach().double().cpu().numpy() for b in scene.bounds(quantile))
+    return (lo + hi) / 2.0
 
 
 FRAMED_SIGMAS = 3.0

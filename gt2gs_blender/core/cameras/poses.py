@@ -136,6 +136,38 @@ def arc_views(
     return _ring_views(center, radius, azimuths, elevation_deg, up, front, width, height, fov_deg, "arc")
 
 
+def outward_views(
+    eye: Sequence[float],
+    n: int,
+    *,
+    width: int,
+    height: int,
+    fov_deg: float = 50.0,
+    pitch_deg: float = 10.0,
+    up: Sequence[float] = (0.0, 0.0, 1.0),
+    first: Sequence[float] = (0.0, 1.0, 0.0),
+) -> list[Camera]:
+    """``n`` cameras standing at ``eye`` and looking out all round it, ``pitch_deg`` below the plane normal to
+    ``up``, ordered by azimuth: the first looks along ``first`` (as Blender's Front view does, by default), each
+    next one counter-clockwise seen from ``up`` (views from inside a room)."""
+    if n < 1:
+        raise ValueError("at least one view is needed")
+    if not -90.0 < pitch_deg < 90.0:
+        raise ValueError(f"pitch_deg must be in (-90, 90), got {pitch_deg}")
+    up_v = unit_vector(up, "up")
+    e1 = _horizontal_direction(first, up_v)
+    e2 = np.cross(up_v, e1)
+    at = np.asarray(eye, dtype=np.float64)
+    down = math.radians(pitch_deg)
+    cameras = []
+    for i, az in enumerate(np.radians(np.linspace(0.0, 360.0, n, endpoint=False))):
+        look = math.cos(down) * (math.cos(az) * e1 + math.sin(az) * e2) - math.sin(down) * up_v
+        cameras.append(
+            look_at(at, at + look, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"inside_{i:03d}")
+        )
+    return cameras
+
+
 def _ring_views(
     center: Sequence[float],
     radius: float,

@@ -76,12 +76,14 @@ class TransferConfig(SpeedSettings):
         flag="--views",
     )
     view_kind: ViewKind = setting(
-        "orbit",
+        "auto",
         "Automatic Views",
-        "Where the automatic views stand when no cameras are given. Orbit: a ring all round the object. Front: a "
-        "short arc on the side the capture was taken from, read from its splats' sizes (splats near the cameras "
-        "are small; where they do not tell, the arc on Blender's front), for a capture seen from the front, such as "
-        "a plant before its wall, given without its cameras",
+        "Where the automatic views stand when no cameras are given. Auto: Inside when the splats' sizes say the "
+        "capture was taken from within it, else Orbit. Orbit: a ring all round the object. Front: a short arc on "
+        "the side the capture was taken from, read from its splats' sizes (splats near the cameras are small; where "
+        "they do not tell, the arc on Blender's front), for a capture seen from the front, such as a plant before "
+        "its wall, given without its cameras. Inside: standing where the cameras stood (else in the middle) and "
+        "looking out all round, for a room",
         "views",
         choices=get_args(ViewKind),
         flag="--auto-views",

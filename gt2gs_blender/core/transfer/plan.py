@@ -21,6 +21,7 @@ import torch
 
 from ..cameras.axes import axis_name
 from ..cameras.camera import Camera
+from ..cameras.generate import chosen_kind
 from ..cameras.up import scene_up
 from ..device import resolve_device
 from ..errors import GT2GSError
@@ -38,7 +39,7 @@ from .stylise import moves_splats
 from .texture import read_texture
 from .views import ViewSet, fit_cameras
 
-RESOLVED = ("up", "resolution", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
+RESOLVED = ("up", "view_kind", "resolution", "texture_height", "layout_projection", "stylise_geometry", "depth_ratio")
 """The settings a plan resolves from the scene and its views (the report shows them beside what was asked)."""
 
 
@@ -102,11 +103,12 @@ def plan_run(
     original = scene.detach().to(device)
     selected = region_mask(region, len(original), device)
     framed = original if selected is None else original.subset(selected)
-    up = config.up
-    if up == "auto" and (views is None or isinstance(views, int)):
-        up = axis_name(scene_up(framed)) or up
+    up, kind = config.up, config.view_kind
+    if views is None or isinstance(views, int):
+        up = (axis_name(scene_up(framed)) or up) if up == "auto" else up
+        kind = chosen_kind(framed, kind)
     resolution = working_resolution(framed, views, config, up)
-    cameras = fit_cameras(framed, views, resolution, config.n_views, up, kind=config.view_kind, cut=config.cut_views)
+    cameras = fit_cameras(framed, views, resolution, config.n_views, up, kind=kind, cut=config.cut_views)
     background = torch.tensor(config.background, dtype=original.dtype, device=device)
     start = stylise_start(original, selected, config.stylised_sh_degree)
     content = hidden = frame = None
@@ -119,7 +121,7 @@ def plan_run(
             # sized on every selected splat, hidden ones too
             frame = layout_frame(framed, content, config)
     used = None if content is None else content.subset([v for v in range(len(cameras)) if v not in dropped])
-    resolved = replace(_resolve(config, cameras, content, used, frame), up=up, resolution=resolution)
+    resolved = replace(_resolve(config, cameras, content, used, frame), up=up, view_kind=kind, resolution=resolution)
     return RunPlan(
         asked=config,
         config=resolved,

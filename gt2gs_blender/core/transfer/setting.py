@@ -18,8 +18,9 @@ Device = Literal["auto", "cpu", "cuda"]
 Rasterizer = Literal["auto", "torch", "cpu", "numba", "gsplat"]
 UpAxis = Literal["+z", "-z", "+y", "-y", "+x", "-x", "auto"]
 """The scene's up direction for automatic views (``cameras.axes.axis_vector``'s names, or estimated)."""
-ViewKind = Literal["orbit", "front"]
-"""Where automatic views stand: a ring all round, or an arc on the side the capture's cameras stood."""
+ViewKind = Literal["auto", "orbit", "front", "inside"]
+"""Where automatic views stand: from inside where the splats say the cameras stood within the capture, else a ring
+(auto); a ring all round; an arc on the side the capture's cameras stood; a ring looking out from within."""
 
 PARTS = {
     "views": "Views",
