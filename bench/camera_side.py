@@ -4,7 +4,7 @@
 
 ``core.cameras.viewpoint.fitted_viewpoint``: a trained splat's footprint matches the pixels it was trained from, so
 its size grows with its distance from the cameras that saw it; one point and a factor fitted to the opaque splats
-(log middle scale = log k + log distance, Huber loss, L-BFGS from six starts), against one size for all (the gain).
+(log middle scale = log k + log distance, Huber loss, seven starts), against one size for all (the gain).
 Per scene: the gain (how well one viewpoint explains the sizes: a capture seen from one side), the point's and the
 farthest splat's (98 %) distance from the middle that way, as shares of the capture's extent; where the cameras are
 known (the fern's LLFF poses) the angle between the directions from the middle to the point and to the cameras'
