@@ -150,22 +150,14 @@ def outward_views(
     """``n`` cameras standing at ``eye`` and looking out all round it, ``pitch_deg`` below the plane normal to
     ``up``, ordered by azimuth: the first looks along ``first`` (as Blender's Front view does, by default), each
     next one counter-clockwise seen from ``up`` (views from inside a room)."""
-    if n < 1:
-        raise ValueError("at least one view is needed")
     if not -90.0 < pitch_deg < 90.0:
         raise ValueError(f"pitch_deg must be in (-90, 90), got {pitch_deg}")
-    up_v = unit_vector(up, "up")
-    e1 = _horizontal_direction(first, up_v)
-    e2 = np.cross(up_v, e1)
+    up_v, looks = _directions(np.linspace(0.0, 360.0, max(n, 0), endpoint=False), -pitch_deg, up, first)
     at = np.asarray(eye, dtype=np.float64)
-    down = math.radians(pitch_deg)
-    cameras = []
-    for i, az in enumerate(np.radians(np.linspace(0.0, 360.0, n, endpoint=False))):
-        look = math.cos(down) * (math.cos(az) * e1 + math.sin(az) * e2) - math.sin(down) * up_v
-        cameras.append(
-            look_at(at, at + look, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"inside_{i:03d}")
-        )
-    return cameras
+    return [
+        look_at(at, at + look, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"inside_{i:03d}")
+        for i, look in enumerate(looks)
+    ]
 
 
 def _ring_views(
@@ -181,26 +173,33 @@ def _ring_views(
     prefix: str,
 ) -> list[Camera]:
     """Cameras at the given azimuths (0 = ``front``) and elevation on a sphere around ``center``."""
-    if len(azimuths_deg) < 1:
-        raise ValueError("at least one view is needed")
     if not (math.isfinite(radius) and radius > 0):
         raise ValueError(f"radius must be positive, got {radius}")
     if not -90.0 < elevation_deg < 90.0:
         raise ValueError(f"elevation_deg must be in (-90, 90), got {elevation_deg}")
+    up_v, offsets = _directions(azimuths_deg, elevation_deg, up, front)
+    c = np.asarray(center, dtype=np.float64)
+    return [
+        look_at(c + radius * offset, c, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"{prefix}_{i:03d}")
+        for i, offset in enumerate(offsets)
+    ]
+
+
+def _directions(
+    azimuths_deg: np.ndarray, elevation_deg: float, up: Sequence[float], front: Sequence[float]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Unit ``up`` and the unit directions (n, 3) at ``azimuths_deg`` (0 = ``front``, counter-clockwise seen from
+    ``up``), ``elevation_deg`` above the plane normal to ``up``."""
+    if len(azimuths_deg) < 1:
+        raise ValueError("at least one view is needed")
     up_v = unit_vector(up, "up")
     e1 = _horizontal_direction(front, up_v)
     e2 = np.cross(up_v, e1)
-    c = np.asarray(center, dtype=np.float64)
     el = math.radians(elevation_deg)
-    cameras = []
-    for i, az in enumerate(np.radians(azimuths_deg)):
-        offset = math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up_v
-        cameras.append(
-            look_at(
-                c + radius * offset, c, width=width, height=height, fov_deg=fov_deg, up=up_v, name=f"{prefix}_{i:03d}"
-            )
-        )
-    return cameras
+    rows = [
+        math.cos(el) * (math.cos(az) * e1 + math.sin(az) * e2) + math.sin(el) * up_v for az in np.radians(azimuths_deg)
+    ]
+    return up_v, np.array(rows)
 
 
 def _horizontal_direction(front: Sequence[float], up: np.ndarray) -> np.ndarray:
