@@ -178,13 +178,14 @@ def _minimised(
         while damping < 1e12:
             step = torch.linalg.solve(normal + damping * torch.diag(normal.diagonal().clamp_min(1e-300)), -gradient)
             trial = residuals(p + step)
-            if _huber(trial[2]) < value:
+            trial_value = _huber(trial[2])
+            if trial_value < value:
                 break
             damping *= 4.0
         else:
             break
         p, (away, squared, r), damping = p + step, trial, damping / 3.0
-        gained, value = value - _huber(r), _huber(r)
+        gained, value = value - trial_value, trial_value
         if gained <= 1e-12 * value:
             break
     finite = math.isfinite(value) and bool(torch.isfinite(p).all())
