@@ -16,7 +16,6 @@ before/after strip. Writes bench/out/room/ (JSON, PNGs); the fit is cached.
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import sys
@@ -29,24 +28,20 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
-from recognise_scenes import CACHE, SHARED
+
+from traced import TEXTURES, Box, Face, fitted_capture, one_look
 
 from gt2gs_blender.app.images import write_png
 from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.generate import auto_views, chosen_kind
 from gt2gs_blender.core.cameras.poses import look_at
 from gt2gs_blender.core.cameras.viewpoint import fitted_viewpoint
-from gt2gs_blender.core.fit.trainer import FitConfig, fit_llff
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.scene.files import read_scene
-from gt2gs_blender.core.transfer.texture import load_texture
 
 OUT = ROOT / "bench" / "out" / "room"
-TEXTURES = SHARED / "data" / "textures"
-ROOM_LO, ROOM_HI = np.array([-2.5, -2.0, 0.0]), np.array([2.5, 2.0, 2.6])
+ROOM_LO, ROOM_HI = (-2.5, -2.0, 0.0), (2.5, 2.0, 2.6)
 """The room's box (metres, +Z up): 5 x 4 m, 2.6 m high."""
-CABINET_LO, CABINET_HI = np.array([1.6, 1.2, 0.0]), np.array([2.5, 2.0, 1.1])
-"""A cabinet in a corner: something that stands before a wall."""
 FACES = {
     (2, 0): ("herringbone_wood.jpg", 1.2),
     (2, 1): (None, 1.0),
@@ -56,9 +51,20 @@ FACES = {
     (1, 1): ("woven_straw.jpg", 1.0),
 }
 """Per (axis, low 0 / high 1) face of the room: its texture (None: plaster) and one repeat's size in metres."""
+CABINET = Box((1.6, 1.2, 0.0), (2.5, 2.0, 1.1), one_look("toy_bricks.jpeg", 0.5, (0.7, 0.8, 0.9)))
+"""A cabinet in a corner: something that stands before a wall."""
+ROOM = Box(
+    ROOM_LO,
+    ROOM_HI,
+    {(axis, high): Face(name, size, 0.75 + 0.1 * axis + 0.05 * high) for (axis, high), (name, size) in FACES.items()},
+    shell=True,
+)
+"""The room's walls, floor and ceiling, seen from inside."""
 EYE = np.array([0.2, -0.3, 1.5])
 """Where the cameras stood: near the middle, at eye height."""
 VIEWS, WIDTH, HEIGHT, FOV_DEG, DOWNSCALE = 48, 200, 150, 70.0, 8
+ITERATIONS = 2500
+"""Steps the room is fitted for by default."""
 
 
 def cameras_inside() -> list[Camera]:
@@ -73,77 +79,18 @@ def cameras_inside() -> list[Camera]:
     return cams
 
 
-def trace(cam: Camera, textures: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """The room from ``cam`` at ``WIDTH`` x ``HEIGHT``: colour (H, W, 3) in [0, 1] and depth along the rays."""
-    small = cam.scaled(WIDTH / cam.width)
-    u, v = np.meshgrid(np.arange(WIDTH) + 0.5, np.arange(HEIGHT) + 0.5)
-    rays = np.stack([(u - small.cx) / small.fx, (v - small.cy) / small.fy, np.ones_like(u)], -1)
-    dirs = rays @ small.cam_to_world[:3, :3].T
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    origin = small.center
-    with np.errstate(divide="ignore", invalid="ignore"):
-        exits = np.where(dirs > 0, (ROOM_HI - origin) / dirs, (ROOM_LO - origin) / dirs)
-        t1, t2 = (CABINET_LO - origin) / dirs, (CABINET_HI - origin) / dirs
-    exits = np.where(np.isfinite(exits), exits, np.inf)
-    axis = np.argmin(exits, axis=-1)
-    depth = np.take_along_axis(exits, axis[..., None], -1)[..., 0]
-    near, far = np.nanmax(np.minimum(t1, t2), -1), np.nanmin(np.maximum(t1, t2), -1)
-    cabinet = (near < far) & (near > 0) & (near < depth)
-    depth = np.where(cabinet, near, depth)
-    points = origin + dirs * depth[..., None]
-    colour = np.empty((HEIGHT, WIDTH, 3))
-    for (face_axis, high), (name, size) in FACES.items():
-        on = ~cabinet & (axis == face_axis) & ((dirs[..., face_axis] > 0) == bool(high))
-        colour[on] = _sample(textures.get(name), points[on], face_axis, size) * (0.75 + 0.1 * face_axis + 0.05 * high)
-    side = np.argmax(np.abs(points - (CABINET_LO + CABINET_HI) / 2.0) / (CABINET_HI - CABINET_LO), axis=-1)
-    for face_axis in range(3):
-        on = cabinet & (side == face_axis)
-        colour[on] = _sample(textures["toy_bricks.jpeg"], points[on], face_axis, 0.5) * (0.7 + 0.1 * face_axis)
-    return colour.clip(0.0, 1.0), depth
-
-
-def _sample(texture: np.ndarray | None, points: np.ndarray, axis: int, size: float) -> np.ndarray:
-    """Colours (n, 3) of ``texture`` tiled ``size`` metres a repeat on the plane normal to ``axis`` (None: plaster)."""
-    if texture is None:
-        return np.full((len(points), 3), 0.88)
-    a, b = [k for k in range(3) if k != axis]
-    h, w = texture.shape[:2]
-    rows = ((-points[:, b] / size) % 1.0 * h).astype(int) % h
-    cols = ((points[:, a] / size * h / w) % 1.0 * w).astype(int) % w
-    return texture[rows, cols]
-
-
-def write_capture(folder: Path) -> list[Camera]:
-    """The room photographed from inside, as an LLFF capture in ``folder`` (poses_bounds.npy, images_8/)."""
-    textures = {name: load_texture(TEXTURES / name) for name, _ in FACES.values() if name} | {
-        "toy_bricks.jpeg": load_texture(TEXTURES / "toy_bricks.jpeg")
-    }
-    cams = cameras_inside()
-    (folder / f"images_{DOWNSCALE}").mkdir(parents=True, exist_ok=True)
-    rows = []
-    for i, cam in enumerate(cams):
-        colour, depth = trace(cam, textures)
-        write_png(folder / f"images_{DOWNSCALE}" / f"image{i:03d}.png", (colour * 255 + 0.5).astype(np.uint8))
-        r = cam.cam_to_world[:3, :3]  # OpenCV columns: right, down, forward; LLFF's: down, right, back
-        pose = np.column_stack([r[:, 1], r[:, 0], -r[:, 2], cam.center, [cam.height, cam.width, cam.fx]])
-        rows.append(np.concatenate([pose.ravel(), [0.9 * depth.min(), 1.1 * depth.max()]]))
-    np.save(folder / "poses_bounds.npy", np.array(rows))
-    return cams
-
-
 def fitted_room(iterations: int) -> Path:
     """The cached fit of the room (made and fitted here first when missing)."""
-    settings = {"iterations": iterations, "views": VIEWS, "size": [WIDTH, HEIGHT], "eye": EYE.tolist(), "seed": 0}
-    key = hashlib.sha1(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:12]
-    folder = CACHE / f"room-{key}"
-    if not (folder / "fit" / "point_cloud.ply").is_file():
-        print(f"making the room and fitting it ({iterations} steps) into {folder} (once)", flush=True)
-        write_capture(folder / "capture")
-        report = fit_llff(
-            folder / "capture", folder / "fit", downscale=DOWNSCALE, config=FitConfig(iterations=iterations)
-        )
-        report.write_json(folder / "fit" / "fit_report.json")
-    return folder
+    settings = {"views": VIEWS, "size": [WIDTH, HEIGHT], "eye": EYE.tolist()}
+    return fitted_capture(
+        "room",
+        settings,
+        cameras_inside(),
+        [ROOM, CABINET],
+        size=(WIDTH, HEIGHT),
+        downscale=DOWNSCALE,
+        iterations=iterations,
+    )
 
 
 def room_share(scene, cams: list[Camera]) -> float:
@@ -162,7 +109,7 @@ def contact_sheet(scene, rings: dict[str, list[Camera]], path: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--iterations", type=int, default=2500)
+    parser.add_argument("--iterations", type=int, default=ITERATIONS)
     parser.add_argument("--transfer", action="store_true", help="also re-texture it at fast (a few minutes)")
     args = parser.parse_args()
     folder = fitted_room(args.iterations)
