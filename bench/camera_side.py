@@ -56,7 +56,9 @@ SLAB = Box((-1.0, -1.0, -0.05), (1.0, 1.0, 0.0), one_look("herringbone_wood.jpg"
 FRONT_VIEWS, OBJECT_VIEWS = 20, 36
 
 
-def front_cameras(eye: tuple[float, float, float], spread: tuple[float, float], target: tuple[float, float, float]):
+def front_cameras(
+    eye: tuple[float, float, float], spread: tuple[float, float], target: tuple[float, float, float]
+) -> list[Camera]:
     """``FRONT_VIEWS`` cameras on a spiral ``spread`` metres wide and high about ``eye`` (across the look), all
     looking at ``target``, as a hand-held forward-facing capture (LLFF's) stands."""
     look = np.subtract(target, eye) / np.linalg.norm(np.subtract(target, eye))
