@@ -28,7 +28,6 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "bench"))
 sys.path.insert(0, str(ROOT))
 
-
 from traced import TEXTURES, Box, Face, fitted_capture, one_look
 
 from gt2gs_blender.app.images import write_png
