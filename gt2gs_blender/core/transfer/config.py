@@ -121,6 +121,14 @@ class TransferConfig(SpeedSettings):
         "texture",
         choices=get_args(Projection),
     )
+    box_fits_faces: bool = setting(
+        True,
+        "Box Fits Faces",
+        "With Projection Box, turn the box about the up axis onto the object's own flat faces (a cabinet's front "
+        "and sides, a guitar's body), so each face shows the texture undistorted and once; an object with no "
+        "flat faces (a donut, a plant) keeps the box as the first view stands; off: always as the first view stands",
+        "texture",
+    )
     keep_scene: float = setting(
         0.85,
         "Keep Scene",

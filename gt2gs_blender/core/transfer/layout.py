@@ -6,7 +6,9 @@ scale and orientation: one texture size in the world whatever the view's depth, 
 every view agrees on.
 - Frame: ``up`` is the views' mean up direction (an orbit's world up, a capture's camera up);
   ``right`` the first view's right made orthogonal to it; ``depth`` completes the frame. A surface
-  facing ``depth`` shows the texture as the first view shows it, rotated by the start angle. The box
+  facing ``depth`` shows the texture as the first view shows it, rotated by the start angle. For the
+  box, ``right`` and ``depth`` then turn about ``up`` onto the object's own faces where it has some
+  (``box_fits_faces``, :mod:`.faces`), so a face lies on one plane of the box. The box
   is anchored at the object's middle (its splats' median), not the world's origin: the same capture
   moved elsewhere gets the same texture, and far from the origin its texture coordinates stay precise.
 - Size: the texture's height spans ``object size / repeats`` in the world, the object's size being
@@ -52,6 +54,7 @@ from ..scene.parts import find_parts
 from .accents import ColourShare, colour_share
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
+from .faces import turned_to_faces
 from .grain import periodic_blur
 from .losses import luma
 from .normals import SURFACE_ALPHA, normal_map, surface_normals
@@ -127,11 +130,13 @@ def layout_frame(scene: GaussianScene, views: ViewSet, config: TransferConfig) -
     if depth @ cameras[0].world_to_cam[2, :3] < 0:
         depth = -depth
     axes = np.stack([right, up, depth])
+    projector = _projector(views, config) if projection(cameras, config.layout_projection) == "view" else None
+    if projector is None and config.box_fits_faces:
+        axes = turned_to_faces(axes, views)
     if config.texture_repeats <= 0:
         repeat = config.texture_height / RENDER_SCALE * _nearest_depth(views, config.n_scales) / cameras[0].fy
     else:
         repeat = _seen_size(scene, cameras[0], config.backend) / config.texture_repeats
-    projector = _projector(views, config) if projection(cameras, config.layout_projection) == "view" else None
     shift = (config.texture_offset_right * repeat, config.texture_offset_up * repeat)
     return LayoutFrame(axes=axes, repeat=repeat, projector=projector, origin=object_middle(scene), shift=shift)
 
