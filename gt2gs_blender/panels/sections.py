@@ -114,6 +114,7 @@ def effective_text(name: str, value: Any, info: dict[str, Any] | None = None) ->
 USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "texture_height": lambda s: s.texture_repeats == 0,
     "layout_projection": lambda s: s.layout,
+    "box_fits_faces": lambda s: s.layout and s.layout_projection != "view",
     "keep_scene": lambda s: s.layout,
     "scene_colour": lambda s: s.layout,
     "keep_accents": lambda s: s.layout and s.scene_colour < 1 and keeps_scene(s),  # raises what is kept

@@ -37,6 +37,7 @@ PREVIEWED = (
     "texture_height",
     "layout",
     "layout_projection",
+    "box_fits_faces",
     "keep_scene",
     "keep_material",
     "scene_colour",
