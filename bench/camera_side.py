@@ -6,9 +6,10 @@
 its size grows with its distance from the cameras that saw it; one point and a factor fitted to the opaque splats
 (log middle scale = log k + log distance, Huber loss, seven starts), against one size for all (the gain).
 Per scene: the gain (how well one viewpoint explains the sizes: a capture seen from one side), the point's and the
-farthest splat's (98 %) distance from the middle that way, as shares of the capture's extent; where the cameras are
-known (the fern's LLFF poses) the angle between the directions from the middle to the point and to the cameras'
-mean, and their distances; and the views *Automatic Views: Auto* draws.
+farthest splat's (98 %) distance from the middle that way, as shares of the capture's extent; the cone (how wide
+the opaque splats spread, seen from the point); where the cameras are known (the fern's LLFF poses) the angle
+between the directions from the middle to the point and to the cameras' mean, and their distances; and the views
+*Automatic Views: Auto* draws.
 
 Beside the shared scenes, synthetic captures whose cameras are known (``bench/traced.py``: ray-traced, fitted by
 ``fit``, cached): two seen from the front (``front-room``: the room of ``bench/room.py`` from one end, looking down
@@ -40,8 +41,9 @@ from gt2gs_blender.core.cameras.camera import Camera
 from gt2gs_blender.core.cameras.files import load_views
 from gt2gs_blender.core.cameras.generate import chosen_kind
 from gt2gs_blender.core.cameras.poses import look_at
-from gt2gs_blender.core.cameras.viewpoint import HUBER, QUANTILE, SAMPLE, fitted_viewpoint
+from gt2gs_blender.core.cameras.viewpoint import HUBER, OPAQUE, QUANTILE, SAMPLE, Viewpoint, fitted_viewpoint
 from gt2gs_blender.core.scene.files import read_scene
+from gt2gs_blender.core.scene.gaussians import GaussianScene
 
 OUT = ROOT / "bench" / "out" / "camera_side.json"
 SHARED_SCENES = ["fern", "donut", "guitar", "playbot"]
@@ -54,6 +56,8 @@ OBJECT = Box((-0.3, -0.3, 0.0), (0.3, 0.3, 0.9), one_look("toy_bricks.jpeg", 0.3
 SLAB = Box((-1.0, -1.0, -0.05), (1.0, 1.0, 0.0), one_look("herringbone_wood.jpg", 0.6, (0.6, 0.6, 0.85)))
 """An object on its patch of ground, seen all round over black."""
 FRONT_VIEWS, OBJECT_VIEWS = 20, 36
+CONE_QUANTILE = 0.95
+"""The cone: this quantile of the opaque splats' angles off the middle's direction, seen from the fitted point."""
 
 
 def front_cameras(
@@ -101,6 +105,16 @@ def synthetic(name: str) -> tuple[Path, list[Camera]]:
     return folder / "fit" / "point_cloud.ply", cams
 
 
+def cone_deg(scene: GaussianScene, viewpoint: Viewpoint) -> float:
+    """How wide (degrees) the opaque splats spread seen from the fitted point: ``CONE_QUANTILE`` of their angles off
+    the direction to the capture's middle (a front capture's stay within its cameras' field of view)."""
+    opaque = scene.opacities.detach().reshape(-1).numpy() > OPAQUE
+    rays = scene.means.detach().double().numpy()[opaque] - viewpoint.point
+    axis = (viewpoint.middle - viewpoint.point) / max(float(np.linalg.norm(viewpoint.middle - viewpoint.point)), 1e-12)
+    cosines = (rays @ axis) / np.maximum(np.linalg.norm(rays, axis=1), 1e-12)
+    return float(np.degrees(np.arccos(np.clip(np.quantile(cosines, 1.0 - CONE_QUANTILE), -1.0, 1.0))))
+
+
 def measure(name: str) -> dict:
     """The row of one scene: the fit's gain, the point, and against the known cameras if any."""
     cameras = None
@@ -125,6 +139,7 @@ def measure(name: str) -> dict:
         "point": viewpoint.point.tolist(),
         "point_from_middle": float(np.linalg.norm(away)) / viewpoint.extent,
         "farthest_splat_that_way": float(np.quantile(along, 1.0 - QUANTILE)) / viewpoint.extent,
+        "cone_deg": cone_deg(scene, viewpoint),
     }
     if cameras is not None:
         mean = np.mean([c.center for c in cameras], axis=0)
@@ -141,14 +156,14 @@ def main() -> None:
     parser.add_argument("--scenes", nargs="+", default=SHARED_SCENES + SYNTHETIC, choices=SHARED_SCENES + SYNTHETIC)
     args = parser.parse_args()
     rows = [measure(name) for name in args.scenes]
-    print(f"{'scene':11s} {'gain':>6s} {'point/extent':>12s} {'farthest':>8s} {'deg':>6s} {'auto':>6s}")
+    print(f"{'scene':11s} {'gain':>6s} {'point/extent':>12s} {'farthest':>8s} {'deg':>6s} {'cone':>6s} {'auto':>6s}")
     for r in rows:
         if r["gain"] is None:
             print(f"{r['scene']:11s} too few opaque splats to fit")
             continue
         degrees = f"{r['degrees_from_cameras']:6.1f}" if "degrees_from_cameras" in r else f"{'':6s}"
         shares = f"{r['point_from_middle']:12.3f} {r['farthest_splat_that_way']:8.3f}"
-        print(f"{r['scene']:11s} {r['gain']:6.1%} {shares} {degrees} {r['auto_kind']:>6s}")
+        print(f"{r['scene']:11s} {r['gain']:6.1%} {shares} {degrees} {r['cone_deg']:6.1f} {r['auto_kind']:>6s}")
     OUT.parent.mkdir(parents=True, exist_ok=True)
     OUT.write_text(json.dumps({"samples": SAMPLE, "huber": HUBER, "rows": rows}, indent=1))
     print(f"wrote {OUT}")
