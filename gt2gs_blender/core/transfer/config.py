@@ -125,8 +125,9 @@ class TransferConfig(SpeedSettings):
         True,
         "Box Fits Faces",
         "With Projection Box, turn the box about the up axis onto the object's own flat faces (a cabinet's front "
-        "and sides, a guitar's body), so each face shows the texture undistorted and once; an object with no "
-        "flat faces (a donut, a plant) keeps the box as the first view stands; off: always as the first view stands",
+        "and sides, a guitar's body), so each face shows the texture undistorted and once, however its file turns "
+        "it; an object whose sides face every way alike (a drum, a figure on flat ground) keeps the box as the "
+        "first view stands; off: always as the first view stands",
         "texture",
     )
     keep_scene: float = setting(

@@ -6,8 +6,7 @@ them blends two planes (the texture twice, out of step) and one at 30° shows it
 to the faces, each face lies on one plane, the texture undistorted; the same object turned in its file gets the
 same layout. The faces' direction is the 4-fold mean of the visible surface's horizontal normal directions (a
 face and its back, left and right side all count alike), over every view's pixels, each weighted by the surface
-area it covers; where no direction stands out (a donut, a plant, a figure on flat ground) the axes stay as they
-were.
+area it covers; where no direction stands out (a figure on flat ground, a drum) the axes stay as they were.
 """
 
 from __future__ import annotations
@@ -22,9 +21,10 @@ from ..cameras.warp import expected_depth
 from .normals import SURFACE_ALPHA, normal_map
 from .views import ViewSet
 
-FACES_CONCENTRATION = 0.2
-"""The 4-fold mean's length (0: directions all round, 1: every face on the box's axes) from which the box turns: the
-guitar's flat body reads 0.49, the donut 0.04, the robot on its ground 0.002 (session 37, docs/quality_log.md)."""
+FACES_CONCENTRATION = 0.01
+"""The 4-fold mean's length (0: directions all round, 1: every face on the box's axes) from which the box turns. The
+guitar's flat body reads 0.49, a fitted toy box on its slab 0.02-0.045 and the donut 0.04, each mean's direction the
+object's own (it follows a turn of the file); the robot on its ground reads 0.002, noise (docs/quality_log.md)."""
 
 
 def faces_direction(views: ViewSet, axes: np.ndarray) -> tuple[float, float]:
