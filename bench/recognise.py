@@ -35,7 +35,9 @@ definition; ``layout-surface`` rows are unshaded (``layout_images`` without the 
 ``layout-target`` rows cover every pixel the measure counts. ``colour_specks`` ("specks") is the share of the
 object's pixels whose hue stands out from their neighbourhood: colour noise a run adds (the original row holds the
 scene's own: sprinkles, flowers). ``accent_shift`` ("accents") is how far the original's small, vivid features (a
-robot's eyes, sprinkles) moved in colour (Lab a, b; NaN where a scene has none).
+robot's eyes, sprinkles) moved in colour (Lab a, b; NaN where a scene has none). ``part_hues`` ("hues") is whether
+the parts keep their hues apart at the object's scale (1: as in the original, whatever tint the texture gives the
+whole; 0: one hue for all).
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -85,7 +87,7 @@ from recognise_scenes import (
 
 from gt2gs_blender.core.api import GaussianScene, TransferConfig, preset, read_scene, render, transfer, write_ply
 from gt2gs_blender.core.atomic import atomic_write
-from gt2gs_blender.core.transfer.metrics import object_ssim
+from gt2gs_blender.core.transfer.metrics import OBJECT_BLUR, object_ssim
 from gt2gs_blender.core.transfer.orientation_preview import orientation_preview, sketch
 from gt2gs_blender.core.transfer.plan import RunPlan, run_texture
 from gt2gs_blender.core.transfer.views import ViewSet
@@ -107,6 +109,7 @@ SUMMED = (
     "content_ssim",
     "colour_specks",
     "accent_shift",
+    "part_hues",
     "splats",
 )
 """The row fields a summary averages per scene and variant."""
@@ -118,6 +121,9 @@ SPECK_CHROMA = 0.06
 ACCENT_CHROMA = 25.0
 ACCENT_APART = 20.0
 ACCENT_WINDOW = 21
+HUE_FLOOR = 2.0
+"""``part_hues``: Lab (a, b) units, about one just-noticeable difference: hue differences between parts within this
+count as none (a scene of one hue has nothing to keep, and a texture's faint tint does not count against it)."""
 """An accent pixel: chroma over 25 Lab units, its (a, b) over 20 from its 21 px neighbourhood's median."""
 TILE = 160
 SHEET_VIEWS = 2
@@ -243,12 +249,40 @@ def accent_shift(views: Views, original: Views) -> float:
     return float(np.mean(shifts)) if shifts else float("nan")
 
 
+def part_hues(views: Views, original: Views) -> float:
+    """Do the parts keep their hues apart (a donut's pink icing on its beige dough, a dark stand under a light
+    guitar): each view's and the original's Lab (a, b) over the object's pixels, averaged to the object's scale
+    (``OBJECT_BLUR``, within the object only), less their mean over it, compared as SSIM compares contrast and
+    structure, ``(2 d.d' + C) / (|d|^2 + |d'|^2 + C)`` summed over the pixels of all views (``C``: ``HUE_FLOOR``
+    squared a pixel). 1: every part's hue relative to the others kept (a tint over the whole object costs nothing:
+    the texture's colour is what a run is for); 0: one hue for all; below 0: hues turned against the scene's."""
+    dot = energy = floor = 0.0
+    for (rgb, _), (reference, alpha) in zip(views, original, strict=True):
+        mask = (alpha > measure.MASK_ALPHA).astype(np.float32)
+        if not mask.any():
+            continue
+        sigma = OBJECT_BLUR * float(mask.sum()) ** 0.5
+        weight = cv2.GaussianBlur(mask, (0, 0), sigma)
+        inside = mask > 0
+        hues = []
+        for image in (rgb, reference):
+            ab = cv2.cvtColor(measure.to_float(image), cv2.COLOR_RGB2Lab)[..., 1:] * mask[..., None]
+            blurred = cv2.GaussianBlur(ab, (0, 0), sigma) / np.maximum(weight, 1e-6)[..., None]
+            hues.append(blurred[inside] - blurred[inside].mean(axis=0))
+        dot += float((hues[0] * hues[1]).sum())
+        energy += float((hues[0] ** 2).sum() + (hues[1] ** 2).sum())
+        floor += HUE_FLOOR**2 * float(inside.sum())
+    return (2.0 * dot + floor) / (energy + floor) if floor else float("nan")
+
+
 def scene_side(views: Views, original: Views) -> dict[str, float]:
-    """The row's measures of the scene's side: ``content_ssim``, ``colour_specks`` and ``accent_shift``."""
+    """The row's measures of the scene's side: ``content_ssim``, ``colour_specks``, ``accent_shift`` and
+    ``part_hues``."""
     return {
         "content_ssim": content_ssim(views, original),
         "colour_specks": colour_specks(views, original),
         "accent_shift": accent_shift(views, original),
+        "part_hues": part_hues(views, original),
     }
 
 
@@ -639,7 +673,7 @@ def is_transfer(variant: str) -> bool:
 def print_table(rows: list[dict], summary: dict) -> None:
     print(
         f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10} "
-        f"{'specks':>6} {'accents':>7}   from preview gram / gabor (original's)"
+        f"{'specks':>6} {'accents':>7} {'hues':>5}   from preview gram / gabor (original's)"
     )
     for r in rows:
         sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
@@ -651,12 +685,14 @@ def print_table(rows: list[dict], summary: dict) -> None:
             preview += f" vs {r['preview_reference']}"
         print(
             f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
-            f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f} {r['accent_shift']:>7.1f}   {preview}"
+            f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f} {r['accent_shift']:>7.1f} "
+            f"{r.get('part_hues', float('nan')):>5.2f}   {preview}"
         )
     print(
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
         "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean), "
-        "accents (Lab a, b shift of the original's small, vivid features; mean)"
+        "accents (Lab a, b shift of the original's small, vivid features; mean), hues (the parts' hues kept apart, "
+        "1 = as the original; mean)"
     )
     for scene, variants in summary.items():
         for variant, s in variants.items():
@@ -670,7 +706,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
                 f"  {scene:6} {variant:18} {s[f'top{TOP}_gram']}/{s['n']} {s[f'top{TOP}_gabor']}/{s['n']} "
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
-                f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}{tail}"
+                f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}   "
+                f"hues {s.get('mean_part_hues', float('nan')):.2f}{tail}"
             )
     met = target_met(summary)
     for key, ok in met.items():

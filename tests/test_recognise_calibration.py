@@ -102,3 +102,20 @@ def test_accent_shift_is_how_far_small_vivid_features_moved_in_colour():
     shifted[:, 30:] = 128
     assert np.isnan(recognise.accent_shift([(shifted, alpha)], [(halves, alpha)]))  # each pixel like its neighbours
     assert np.isnan(recognise.accent_shift([(grey, alpha)], [(grey, alpha)]))
+
+
+def test_part_hues_keep_parts_apart_whatever_tint_the_whole_takes():
+    """The bench's part-hue measure: a pink and a beige half of like light (icing on dough) kept are 1, and 1 still
+    under a tint over the whole; both halves one hue is near 0 (the floor's share alone); the hues swapped is
+    below 0; a scene of one hue has nothing to keep, so any one hue scores 1."""
+    alpha = np.ones((60, 80), np.float32)
+    two = np.empty((60, 80, 3), np.uint8)
+    two[:, :40], two[:, 40:] = (200, 140, 150), (190, 160, 120)
+    tinted = np.clip(two.astype(int) + np.array([-20, 0, 25]), 0, 255).astype(np.uint8)
+    one, swapped = np.full_like(two, (195, 150, 135)), two[:, ::-1].copy()
+    assert recognise.part_hues([(two, alpha)], [(two, alpha)]) == pytest.approx(1.0)
+    assert recognise.part_hues([(tinted, alpha)], [(two, alpha)]) > 0.97
+    assert 0.0 < recognise.part_hues([(one, alpha)], [(two, alpha)]) < 0.05
+    assert recognise.part_hues([(swapped, alpha)], [(two, alpha)]) < -0.9
+    plain = np.full_like(two, 128)
+    assert recognise.part_hues([(one, alpha)], [(plain, alpha)]) == pytest.approx(1.0)
