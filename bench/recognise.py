@@ -121,10 +121,10 @@ SPECK_CHROMA = 0.06
 ACCENT_CHROMA = 25.0
 ACCENT_APART = 20.0
 ACCENT_WINDOW = 21
+"""An accent pixel: chroma over 25 Lab units, its (a, b) over 20 from its 21 px neighbourhood's median."""
 HUE_FLOOR = 2.0
 """``part_hues``: Lab (a, b) units, about one just-noticeable difference: hue differences between parts within this
 count as none (a scene of one hue has nothing to keep, and a texture's faint tint does not count against it)."""
-"""An accent pixel: chroma over 25 Lab units, its (a, b) over 20 from its 21 px neighbourhood's median."""
 TILE = 160
 SHEET_VIEWS = 2
 """Held-out views per result on the contact sheet."""
