@@ -120,3 +120,27 @@ def test_a_run_keeps_a_small_vivid_spot_its_colour_on_the_splats_the_preview_and
     (ideal,) = layout_images(views, grey, layout_frame(scene, views, config), 0.0, True, keep=1.0, colour=mix)
     middle = ideal[47:49, 47:49]  # the spot's middle on screen (it spans 7 px)
     assert middle[..., :3].reshape(-1, 3).mean(0).numpy() == pytest.approx(expected, abs=0.03)
+
+
+ICING, DOUGH = (0.85, 0.55, 0.65), (0.80, 0.65, 0.45)
+
+
+def test_keep_hues_shifts_each_part_s_texture_by_its_hue_against_the_scene_s_mean_and_adds_no_light():
+    """Keep Hues 1 with no Scene Colour or accents: each splat's mix is the shaded texture with its chromaticity
+    (colour over luminance) moved by exactly its part's chromaticity less the scene's mean (worked out by hand from
+    the parts' mean colour), and its luminance is the plain mix's; Keep Hues 0 leaves the mix as it was."""
+    colours = torch.tensor([ICING] * 30 + [DOUGH] * 70)
+    shade = torch.rand(100, generator=torch.Generator().manual_seed(0)) * 0.5 + 0.4
+    texture = torch.rand(100, 3, generator=torch.Generator().manual_seed(1)) * 0.3 + 0.35
+    share = colour_share(colours, torch.ones(100), 0.0, 0.0, hues=1.0)
+    assert isinstance(share, ColourShare) and colour_share(colours, torch.ones(100), 0.0, 0.0) == 0.0
+    plain, tinted = (under_scene(texture, kept_scene(shade, colours, c)) for c in (0.0, share))
+    luma = torch.tensor(LUMA, dtype=torch.float32)
+    assert torch.allclose(tinted @ luma, plain @ luma, atol=1e-6)
+    mean = 0.3 * np.array(ICING) + 0.7 * np.array(DOUGH)
+    offset = colours.numpy() / (colours.numpy() @ LUMA)[:, None] - mean / (mean @ LUMA)
+    moved = (tinted / (tinted @ luma)[:, None] - plain / (plain @ luma)[:, None]).numpy()
+    assert moved == pytest.approx(offset, abs=1e-4)
+    assert moved[:30, 0].mean() > moved[30:, 0].mean() + 0.1  # the icing pinker than the dough under one texture
+    untinted = colour_share(colours, torch.ones(100), 0.0, 0.8, hues=0.0)
+    assert torch.equal(under_scene(texture, kept_scene(shade, colours, untinted)), plain)  # no accent, no hue

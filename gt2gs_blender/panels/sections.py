@@ -46,6 +46,7 @@ FRONT = {
         "keep_material",
         "scene_colour",
         "keep_accents",
+        "keep_hues",
         "scene_brightness",
     ),
     "Views": ("n_views", "view_kind"),
@@ -118,6 +119,7 @@ USED_WHEN: dict[str, Callable[[Any], bool]] = {
     "keep_scene": lambda s: s.layout,
     "scene_colour": lambda s: s.layout,
     "keep_accents": lambda s: s.layout and s.scene_colour < 1 and keeps_scene(s),  # raises what is kept
+    "keep_hues": lambda s: s.layout and s.scene_colour < 1 and keeps_scene(s),  # tints what is kept
     "scene_brightness": lambda s: s.layout,
     "keep_material": lambda s: s.layout and (s.keep_scene > 0 or s.scene_brightness > 0),  # the shade, the exposure
     "shade_softness": lambda s: s.layout and (s.keep_scene > 0 or s.scene_colour > 0),  # what it averages

@@ -42,6 +42,7 @@ PREVIEWED = (
     "keep_material",
     "scene_colour",
     "keep_accents",
+    "keep_hues",
     "scene_brightness",
     "shade_softness",
     "texture_softness",

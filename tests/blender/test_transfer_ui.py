@@ -616,6 +616,7 @@ def test_sub_panels_group_every_scene_setting_in_artists_terms(fresh):
         "keep_material",
         "scene_colour",
         "keep_accents",
+        "keep_hues",
         "scene_brightness",
     ]
     assert sections.section_settings("Texture") == []
@@ -709,6 +710,7 @@ def test_settings_a_run_ignores_are_greyed_out(fresh):
     settings.scene_brightness = 0.0
     assert not setting_used(settings, "keep_material")  # neither a shade nor an exposure left to take it
     assert not setting_used(settings, "keep_accents")  # the texture alone: no colour of the scene to raise
+    assert not setting_used(settings, "keep_hues")  # nor a part's hue to tint it with
     settings.texture_repeats, settings.layout = 0.0, False
     assert setting_used(settings, "texture_height") and not setting_used(settings, "lambda_layout")
     assert setting_used(settings, "angle")

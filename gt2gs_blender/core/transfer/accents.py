@@ -9,6 +9,10 @@ most of their own colour. An accent keeps its hue only: its light and dark stay 
 texture's pattern runs on through it (a flat hue there interrupted the pattern, and the measure lost a donut's toy
 bricks). One table over (a, b) per run (:class:`ColourShare`), so the splats, the layout term's images and the
 preview follow one rule.
+
+Parts (``keep_hues``): every colour also keeps its hue against the scene's mean one, a shift of the texture's own hue
+that adds no light or dark (a chromaticity offset, luminance 0), so the texture keeps its palette and its pattern
+while the icing stays pinker than the dough and a guitar's amber top yellower than its stand.
 """
 
 from __future__ import annotations
@@ -45,6 +49,10 @@ class ColourShare:
     keep: float
     rarity: np.ndarray
     """(B, B) over Lab (a, b), in 0..1: 1 where the scene holds no weight near that colour."""
+    hues: float = 0.0
+    """*Keep Hues*: how much of each colour's hue against ``mean`` shifts the texture's under it."""
+    mean: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    """The scene's mean chromaticity (its weighted mean colour over that colour's luminance)."""
 
     def __call__(self, colours: torch.Tensor) -> torch.Tensor:
         """(N,) the share of each of ``colours`` (N, 3 sRGB in 0..1) that stays under the texture."""
@@ -57,13 +65,18 @@ class ColourShare:
 
     def mixed(self, colours: torch.Tensor, shade: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """For ``colours`` (N, 3 sRGB in 0..1) shaded ``shade`` (N,) under the texture: (N, 1) the share that stays,
-        (N, 3) what ``base`` of each colour adds as it is, and (N, 3) the accent's hue, which the texture's
-        luminance scales (its raise of the share, times the shade, over the colour's own luminance): the mix keeps
-        the luminance the texture alone gives it and takes the accent's hue."""
+        (N, 3) what ``base`` of each colour adds as it is, and (N, 3) the hue, which the texture's luminance scales:
+        the accent's (its raise of the share, times the shade, over the colour's own luminance) and ``hues`` of the
+        colour's chromaticity less the scene's mean on the texture's share (:meth:`offset`). The mix keeps the
+        luminance the texture alone gives it and takes the accent's hue and the part's."""
         share = self(colours)[:, None]
-        luminance = luma(colours).clamp_min(DARK_FLOOR)
-        hue = (share - self.base) * shade[:, None] * colours / luminance[:, None]
-        return share, self.base * colours, hue
+        chromaticity = colours / luma(colours).clamp_min(DARK_FLOOR)[:, None]
+        hue = (share - self.base) * chromaticity + self.hues * (1.0 - share) * self.offset(chromaticity)
+        return share, self.base * colours, shade[:, None] * hue
+
+    def offset(self, chromaticity: torch.Tensor) -> torch.Tensor:
+        """(N, 3) ``chromaticity`` (N, 3, colours over their luminance) less the scene's mean: luminance 0."""
+        return chromaticity - torch.tensor(self.mean, dtype=chromaticity.dtype, device=chromaticity.device)
 
     def accent(self, colours: np.ndarray) -> np.ndarray:
         """(N,) how much of an accent each of ``colours`` (N, 3 sRGB in 0..1) is: vivid times rare."""
@@ -73,19 +86,34 @@ class ColourShare:
         return (vivid * self.rarity[_cell(lab[:, 1]), _cell(lab[:, 2])]).astype(np.float32)
 
 
-def colour_share(colours: torch.Tensor, weights: torch.Tensor, base: float, keep: float) -> float | ColourShare:
-    """What of the scene's own colour a run keeps under the texture: ``base`` alone when ``keep`` is 0 (or the
-    scene has no weight), else a :class:`ColourShare` whose rarity comes from ``colours`` (N, 3 sRGB in 0..1)
-    weighed by ``weights`` (N,)."""
+def colour_share(
+    colours: torch.Tensor, weights: torch.Tensor, base: float, keep: float, hues: float = 0.0
+) -> float | ColourShare:
+    """What of the scene's own colour a run keeps under the texture: ``base`` alone when ``keep`` and ``hues`` are 0
+    (or the scene has no weight), else a :class:`ColourShare` whose rarity and mean chromaticity come from
+    ``colours`` (N, 3 sRGB in 0..1) weighed by ``weights`` (N,)."""
     w = weights.detach().double().cpu().numpy().clip(0.0, None)
-    if keep <= 0.0 or not len(w) or float(w.sum()) <= 0.0:
+    if (keep <= 0.0 and hues <= 0.0) or not len(w) or float(w.sum()) <= 0.0:
         return base
-    lab = srgb_to_lab(colours.detach().double().cpu().numpy().clip(0.0, 1.0))
+    rgb = colours.detach().double().cpu().numpy().clip(0.0, 1.0)
+    lab = srgb_to_lab(rgb)
     share = np.zeros((CELLS, CELLS))
     np.add.at(share, (_cell(lab[:, 1]), _cell(lab[:, 2])), w / w.sum())
     sigma = NEAR / BIN
     near = cv2.GaussianBlur(share, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT) * (2.0 * np.pi * sigma**2)
-    return ColourShare(base, keep, np.clip(1.0 - near / COMMON, 0.0, 1.0))
+    rarity = np.clip(1.0 - near / COMMON, 0.0, 1.0)
+    return ColourShare(base, keep, rarity, hues, mean_chromaticity(rgb, w))
+
+
+def mean_chromaticity(colours: np.ndarray, weights: np.ndarray) -> tuple[float, float, float]:
+    """The chromaticity of ``colours``' (N, 3 sRGB in 0..1) ``weights``-averaged colour (its channels over its
+    luminance; grey when that mean is black)."""
+    mean = weights @ colours / weights.sum()
+    luminance = float(luma(torch.from_numpy(mean)))
+    if luminance <= DARK_FLOOR:
+        return (1.0, 1.0, 1.0)
+    r, g, b = (float(c) / luminance for c in mean)
+    return (r, g, b)
 
 
 def _cell(values: np.ndarray) -> np.ndarray:

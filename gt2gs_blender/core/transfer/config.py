@@ -164,6 +164,17 @@ class TransferConfig(SpeedSettings):
         min=0.0,
         max=1.0,
     )
+    keep_hues: float = setting(
+        0.0,
+        "Keep Hues",
+        "How much each part's own hue, against the capture's overall colour, tints the laid-out texture (pink "
+        "icing on beige dough, an amber top above a dark neck), with no change to its light and dark, so the "
+        "texture keeps its palette and pattern; 0.5-1 keeps parts apart in colour, though grey parts of a warm "
+        "capture turn cooler and the capture's colour speckle shows more; 0: the texture's hue everywhere",
+        "texture",
+        min=0.0,
+        max=1.0,
+    )
     scene_brightness: float = setting(
         1.0,
         "Scene Brightness",

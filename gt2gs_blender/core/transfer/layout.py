@@ -408,13 +408,14 @@ def layout_shading(
 def scene_colour_mix(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> float | ColourShare:
     """How much of its own colour each part of ``scene`` keeps under the texture (:func:`colour_share`):
     ``scene_colour``, raised by ``keep_accents`` for the rare, vivid colours among the splats of ``rows`` (all when
-    None) as they cover a view, when the run keeps anything of the scene (else the texture alone)."""
-    if not keeps_scene(config) or config.keep_accents <= 0:
+    None) as they cover a view, and each one's hue against their mean by ``keep_hues``, when the run keeps anything
+    of the scene (else the texture alone)."""
+    if not keeps_scene(config) or (config.keep_accents <= 0 and config.keep_hues <= 0):
         return config.scene_colour
     part = slice(None) if rows is None else rows
     weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
     colours = scene.base_colors.detach()[part].clamp(0.0, 1.0)
-    return colour_share(colours, weights, config.scene_colour, config.keep_accents)
+    return colour_share(colours, weights, config.scene_colour, config.keep_accents, config.keep_hues)
 
 
 def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> torch.Tensor | None:
