@@ -12,7 +12,14 @@ import torch
 from gt2gs_blender.core.render import render
 from gt2gs_blender.core.transfer.accents import COMMON, ColourShare, colour_share
 from gt2gs_blender.core.transfer.config import TransferConfig
-from gt2gs_blender.core.transfer.layout import layout_frame, layout_images, scene_colour_mix, with_colours
+from gt2gs_blender.core.transfer.layout import (
+    layout_frame,
+    layout_images,
+    layout_parts,
+    scene_colour_mix,
+    seen_images,
+    with_colours,
+)
 from gt2gs_blender.core.transfer.shade import kept_scene, under_scene
 from gt2gs_blender.core.transfer.views import render_views
 from tests.test_layout import front_camera, wall, zero_step_config
@@ -125,22 +132,69 @@ def test_a_run_keeps_a_small_vivid_spot_its_colour_on_the_splats_the_preview_and
 ICING, DOUGH = (0.85, 0.55, 0.65), (0.80, 0.65, 0.45)
 
 
-def test_keep_hues_shifts_each_part_s_texture_by_its_hue_against_the_scene_s_mean_and_adds_no_light():
+def chromaticities(colours: np.ndarray) -> np.ndarray:
+    """(N, 3) ``colours`` over their luminance, by hand."""
+    return colours / (colours @ LUMA)[:, None]
+
+
+def test_keep_hues_shifts_each_splat_s_texture_by_its_part_s_hue_against_grey_and_adds_no_light():
     """Keep Hues 1 with no Scene Colour or accents: each splat's mix is the shaded texture with its chromaticity
-    (colour over luminance) moved by exactly its part's chromaticity less the scene's mean (worked out by hand from
-    the parts' mean colour), and its luminance is the plain mix's; Keep Hues 0 leaves the mix as it was."""
-    colours = torch.tensor([ICING] * 30 + [DOUGH] * 70)
+    moved by exactly its part's chromaticity less grey's (worked out by hand), whatever the splat's own colour (its
+    noise does not pass into the shift), a grey part's not at all, and its luminance is the plain mix's; with no
+    parts given, or Keep Hues 0, the mix is as it was."""
+    noise = torch.rand(100, 3, generator=torch.Generator().manual_seed(2)) * 0.1 - 0.05
+    parts = torch.tensor([ICING] * 30 + [DOUGH] * 50 + [GREY] * 20)
+    colours = (parts + noise).clamp(0.0, 1.0)
     shade = torch.rand(100, generator=torch.Generator().manual_seed(0)) * 0.5 + 0.4
     texture = torch.rand(100, 3, generator=torch.Generator().manual_seed(1)) * 0.3 + 0.35
     share = colour_share(colours, torch.ones(100), 0.0, 0.0, hues=1.0)
     assert isinstance(share, ColourShare) and colour_share(colours, torch.ones(100), 0.0, 0.0) == 0.0
-    plain, tinted = (under_scene(texture, kept_scene(shade, colours, c)) for c in (0.0, share))
+    plain = under_scene(texture, kept_scene(shade, colours, 0.0))
+    tinted = under_scene(texture, kept_scene(shade, colours, share, parts=parts))
     luma = torch.tensor(LUMA, dtype=torch.float32)
     assert torch.allclose(tinted @ luma, plain @ luma, atol=1e-6)
-    mean = 0.3 * np.array(ICING) + 0.7 * np.array(DOUGH)
-    offset = colours.numpy() / (colours.numpy() @ LUMA)[:, None] - mean / (mean @ LUMA)
-    moved = (tinted / (tinted @ luma)[:, None] - plain / (plain @ luma)[:, None]).numpy()
-    assert moved == pytest.approx(offset, abs=1e-4)
-    assert moved[:30, 0].mean() > moved[30:, 0].mean() + 0.1  # the icing pinker than the dough under one texture
+    moved = chromaticities(tinted.double().numpy()) - chromaticities(plain.double().numpy())
+    assert moved == pytest.approx(chromaticities(parts.double().numpy()) - 1.0, abs=1e-4)
+    assert np.abs(moved[80:]).max() < 1e-5  # a grey part keeps the texture's hue
+    assert torch.equal(under_scene(texture, kept_scene(shade, colours, share)), plain)  # no parts, no hue
     untinted = colour_share(colours, torch.ones(100), 0.0, 0.8, hues=0.0)
-    assert torch.equal(under_scene(texture, kept_scene(shade, colours, untinted)), plain)  # no accent, no hue
+    assert torch.equal(under_scene(texture, kept_scene(shade, colours, untinted, parts=parts)), plain)
+
+
+def test_a_run_keeps_each_part_s_hue_on_the_splats_the_preview_and_the_layout_image(shared, tmp_path):
+    """A flat grey texture on a wall whose left half is icing and right half dough, Keep Scene 1, Keep Hues 1 and
+    nothing else of the scene's colour: the texture's grey takes each part's chromaticity (``find_parts`` finds
+    the two halves), so each half comes out in its own hue at the shaded texture's luminance; the preview shows
+    what the run lays and the layout term's image holds each half to the same colour."""
+    from gt2gs_blender.core.api import transfer
+    from gt2gs_blender.core.transfer.orientation_preview import preview
+
+    base, cam = wall(n=60), front_camera(96)
+    left = base.means[:, 0] < 0
+    scene = with_colours(base, torch.where(left[:, None], torch.tensor(ICING), torch.tensor(DOUGH)))
+    grey = np.full((64, 64, 3), 0.3, np.float32)
+    config = zero_step_config(
+        shared, tmp_path, keep_scene=1.0, scene_colour=0.0, keep_accents=0.0, keep_hues=1.0, scene_brightness=0.0
+    )
+    laid = transfer(scene, grey, [cam], config).scene
+    for side, colour in ((laid.means[:, 0] < -0.1, ICING), (laid.means[:, 0] > 0.1, DOUGH)):
+        got = laid.base_colors[side].double().numpy()
+        assert np.abs(chromaticities(got) - chromaticities(np.array([colour]))).max() < 0.01
+        assert np.abs(got @ LUMA - 0.3 * float(np.dot(colour, LUMA)) / max_luma()).max() < 0.01  # shaded
+
+    shown = render(laid, [cam], background=torch.zeros(3)).colors[0].clamp(0, 1).numpy() * 255.0
+    assert np.abs(preview(scene, grey, [cam], config, size=96).image.astype(np.float32) - shown).max() <= 1.0
+
+    views = render_views(scene, [cam], torch.zeros(3), "auto")
+    parts = seen_images(scene, views, layout_parts(scene, config), "auto")
+    mix = colour_share(scene.base_colors, torch.ones(len(scene)), 0.0, 0.0, hues=1.0)
+    frame = layout_frame(scene, views, config)
+    (ideal,) = layout_images(views, grey, frame, 0.0, True, keep=1.0, colour=mix, parts=parts)
+    for columns, colour in ((slice(20, 30), ICING), (slice(66, 76), DOUGH)):
+        seen = ideal[40:56, columns, :3].reshape(-1, 3).double().numpy()
+        assert chromaticities(seen).mean(0) == pytest.approx(chromaticities(np.array([colour]))[0], abs=0.02)
+
+
+def max_luma() -> float:
+    """The wall's bright end: the lighter half's luminance (the shade is each splat's luminance over it)."""
+    return max(float(np.dot(ICING, LUMA)), float(np.dot(DOUGH, LUMA)))

@@ -10,9 +10,11 @@ texture's pattern runs on through it (a flat hue there interrupted the pattern, 
 bricks). One table over (a, b) per run (:class:`ColourShare`), so the splats, the layout term's images and the
 preview follow one rule.
 
-Parts (``keep_hues``): every colour also keeps its hue against the scene's mean one, a shift of the texture's own hue
-that adds no light or dark (a chromaticity offset, luminance 0), so the texture keeps its palette and its pattern
-while the icing stays pinker than the dough and a guitar's amber top yellower than its stand.
+Parts (``keep_hues``): every splat also keeps its part's hue (the mean colour of the part ``find_parts`` puts it in)
+against grey, a shift of the texture's own hue that adds no light or dark (a chromaticity offset, luminance 0), so the
+texture keeps its palette and its pattern while the icing stays pinker than the dough and a guitar's amber top
+yellower than its stand. One hue per part, so a splat's own colour noise does not speckle the texture, and measured
+from grey, so a grey part keeps the texture's hue and no part takes one the capture lacks.
 """
 
 from __future__ import annotations
@@ -50,9 +52,7 @@ class ColourShare:
     rarity: np.ndarray
     """(B, B) over Lab (a, b), in 0..1: 1 where the scene holds no weight near that colour."""
     hues: float = 0.0
-    """*Keep Hues*: how much of each colour's hue against ``mean`` shifts the texture's under it."""
-    mean: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    """The scene's mean chromaticity (its weighted mean colour over that colour's luminance)."""
+    """*Keep Hues*: how much of each splat's part's hue against grey shifts the texture's under it."""
 
     def __call__(self, colours: torch.Tensor) -> torch.Tensor:
         """(N,) the share of each of ``colours`` (N, 3 sRGB in 0..1) that stays under the texture."""
@@ -63,20 +63,20 @@ class ColourShare:
         accent = torch.from_numpy(self.accent(colours.detach().float().cpu().numpy()))
         return ((1.0 - self.base) * self.keep * accent).to(colours)
 
-    def mixed(self, colours: torch.Tensor, shade: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """For ``colours`` (N, 3 sRGB in 0..1) shaded ``shade`` (N,) under the texture: (N, 1) the share that stays,
-        (N, 3) what ``base`` of each colour adds as it is, and (N, 3) the hue, which the texture's luminance scales:
-        the accent's (its raise of the share, times the shade, over the colour's own luminance) and ``hues`` of the
-        colour's chromaticity less the scene's mean on the texture's share (:meth:`offset`). The mix keeps the
-        luminance the texture alone gives it and takes the accent's hue and the part's."""
+    def mixed(
+        self, colours: torch.Tensor, shade: torch.Tensor, parts: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """For ``colours`` (N, 3 sRGB in 0..1) shaded ``shade`` (N,) under the texture, of parts whose mean colours
+        are ``parts`` (N, 3; None: no part's hue): (N, 1) the share that stays, (N, 3) what ``base`` of each colour
+        adds as it is, and (N, 3) the hue, which the texture's luminance scales: the accent's (its raise of the
+        share, times the shade, over the colour's own luminance) and ``hues`` of the part's chromaticity less grey on
+        the texture's share (:func:`hue_offset`). The mix keeps the luminance the texture alone gives it and takes
+        the accent's hue and the part's."""
         share = self(colours)[:, None]
-        chromaticity = colours / luma(colours).clamp_min(DARK_FLOOR)[:, None]
-        hue = (share - self.base) * chromaticity + self.hues * (1.0 - share) * self.offset(chromaticity)
+        hue = (share - self.base) * chromaticity(colours)
+        if parts is not None and self.hues > 0:
+            hue = hue + self.hues * (1.0 - share) * hue_offset(parts.to(colours))
         return share, self.base * colours, shade[:, None] * hue
-
-    def offset(self, chromaticity: torch.Tensor) -> torch.Tensor:
-        """(N, 3) ``chromaticity`` (N, 3, colours over their luminance) less the scene's mean: luminance 0."""
-        return chromaticity - torch.tensor(self.mean, dtype=chromaticity.dtype, device=chromaticity.device)
 
     def accent(self, colours: np.ndarray) -> np.ndarray:
         """(N,) how much of an accent each of ``colours`` (N, 3 sRGB in 0..1) is: vivid times rare."""
@@ -90,8 +90,8 @@ def colour_share(
     colours: torch.Tensor, weights: torch.Tensor, base: float, keep: float, hues: float = 0.0
 ) -> float | ColourShare:
     """What of the scene's own colour a run keeps under the texture: ``base`` alone when ``keep`` and ``hues`` are 0
-    (or the scene has no weight), else a :class:`ColourShare` whose rarity and mean chromaticity come from
-    ``colours`` (N, 3 sRGB in 0..1) weighed by ``weights`` (N,)."""
+    (or the scene has no weight), else a :class:`ColourShare` whose rarity comes from ``colours`` (N, 3 sRGB in
+    0..1) weighed by ``weights`` (N,)."""
     w = weights.detach().double().cpu().numpy().clip(0.0, None)
     if (keep <= 0.0 and hues <= 0.0) or not len(w) or float(w.sum()) <= 0.0:
         return base
@@ -102,18 +102,17 @@ def colour_share(
     sigma = NEAR / BIN
     near = cv2.GaussianBlur(share, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT) * (2.0 * np.pi * sigma**2)
     rarity = np.clip(1.0 - near / COMMON, 0.0, 1.0)
-    return ColourShare(base, keep, rarity, hues, mean_chromaticity(rgb, w))
+    return ColourShare(base, keep, rarity, hues)
 
 
-def mean_chromaticity(colours: np.ndarray, weights: np.ndarray) -> tuple[float, float, float]:
-    """The chromaticity of ``colours``' (N, 3 sRGB in 0..1) ``weights``-averaged colour (its channels over its
-    luminance; grey when that mean is black)."""
-    mean = weights @ colours / weights.sum()
-    luminance = float(luma(torch.from_numpy(mean)))
-    if luminance <= DARK_FLOOR:
-        return (1.0, 1.0, 1.0)
-    r, g, b = (float(c) / luminance for c in mean)
-    return (r, g, b)
+def chromaticity(colours: torch.Tensor) -> torch.Tensor:
+    """(N, 3) ``colours`` (N, 3) over their luminance (at least ``DARK_FLOOR``): their hue apart from light and dark."""
+    return colours / luma(colours).clamp_min(DARK_FLOOR)[:, None]
+
+
+def hue_offset(colours: torch.Tensor) -> torch.Tensor:
+    """(N, 3) the chromaticity of ``colours`` (N, 3) less grey's: luminance 0, so it shifts a hue and nothing else."""
+    return chromaticity(colours) - 1.0
 
 
 def _cell(values: np.ndarray) -> np.ndarray:

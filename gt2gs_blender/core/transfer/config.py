@@ -167,10 +167,9 @@ class TransferConfig(SpeedSettings):
     keep_hues: float = setting(
         0.0,
         "Keep Hues",
-        "How much each part's own hue, against the capture's overall colour, tints the laid-out texture (pink "
-        "icing on beige dough, an amber top above a dark neck), with no change to its light and dark, so the "
-        "texture keeps its palette and pattern; 0.5-1 keeps parts apart in colour, though grey parts of a warm "
-        "capture turn cooler and the capture's colour speckle shows more; 0: the texture's hue everywhere",
+        "How much each part's own hue tints the laid-out texture (pink icing on beige dough, an amber top above "
+        "a dark neck), one hue per part and no change to its light and dark, so the texture keeps its pattern; "
+        "grey parts keep the texture's own hue; 0: the texture's hue everywhere",
         "texture",
         min=0.0,
         max=1.0,

@@ -234,6 +234,7 @@ def layout_images(
     colour: float | ColourShare = 0.0,
     exposure: float = 1.0,
     bright: Sequence[torch.Tensor] | None = None,
+    parts: Sequence[torch.Tensor] | None = None,
 ) -> list[torch.Tensor]:
     """Per view, the laid-out texture as an ideal surface would show it (H, W, 4: colour and coverage),
     sampled per pixel at the surface point the view's depth gives and prefiltered to a pixel's footprint:
@@ -243,11 +244,13 @@ def layout_images(
     that colour's :func:`shading` to the power ``keep``, with ``colour`` of the colour mixed in (one share, or each
     colour's: :func:`scene_colour_mix`), the mix at the splats' ``exposure`` (:func:`laid_exposure`); the shade is
     taken against the bright end of the view's surface, or against ``bright`` (H, W per view: the luminance each
-    pixel's material shows fully lit, :func:`bright_images`)."""
+    pixel's material shows fully lit, :func:`bright_images`); each pixel's part's hue from ``parts`` (H, W, 3 per
+    view: the mean colour of the part it shows, :func:`seen_images` of :func:`layout_parts`)."""
     images = []
-    lit_at = [None] * len(views.cameras) if bright is None else bright
-    for camera, depth, alpha, premultiplied, lit in zip(
-        views.cameras, views.depths, views.alphas, views.premultiplied, lit_at
+    none = [None] * len(views.cameras)
+    lit_at, parts_at = none if bright is None else bright, none if parts is None else parts
+    for camera, depth, alpha, premultiplied, lit, part in zip(
+        views.cameras, views.depths, views.alphas, views.premultiplied, lit_at, parts_at
     ):
         normal, _, _ = normal_map(camera, depth.cpu(), alpha.cpu())
         z = expected_depth(depth.cpu(), alpha.cpu(), SURFACE_ALPHA)
@@ -261,7 +264,8 @@ def layout_images(
             if softness > 0:  # the same average as the splats' shade
                 seen = torch.stack([spatial_blur(points, seen[:, c], weight, softness) for c in range(3)], dim=1)
             full = None if lit is None else lit.cpu()[covered].float()
-            kept = kept_scene(shading(luma(seen), keep=keep, bright=full), seen, colour, exposure)
+            of_parts = None if part is None else part.cpu()[covered].float()
+            kept = kept_scene(shading(luma(seen), keep=keep, bright=full), seen, colour, exposure, of_parts)
             colours = under_scene(colours, kept)
         image = torch.zeros(camera.height, camera.width, 4)
         image[covered] = torch.cat([colours.float(), torch.ones(len(colours), 1)], dim=1)
@@ -392,24 +396,25 @@ def layout_shading(
     texture: np.ndarray,
     mix: float | ColourShare,
     bright: torch.Tensor | None = None,
+    parts: torch.Tensor | None = None,
 ) -> torch.Tensor | None:
     """What of the scene a run with ``config`` lays ``texture`` over (:func:`layout_shade`, ``shade_softness``
     repeats of ``frame``, ``keep_scene``, the colour ``mix`` of :func:`scene_colour_mix`, ``scene_brightness``,
-    the shade against ``bright``,
-    :func:`layout_bright`), or None when it keeps the texture's own colours. *Scene Brightness* keeps only
-    ``keep_material`` of its exposure (in stops): a part given the texture's brightness is not darkened back."""
+    the shade against ``bright`` (:func:`layout_bright`), the parts' hues of ``parts`` (:func:`layout_parts`)),
+    or None when it keeps the texture's own colours. *Scene Brightness* keeps only ``keep_material`` of its
+    exposure (in stops): a part given the texture's brightness is not darkened back."""
     if not keeps_scene(config):
         return None
     width = shade_width(frame, config)
     brightness = config.scene_brightness * config.keep_material
-    return layout_shade(scene, rows, width, config.keep_scene, mix, texture, brightness, bright)
+    return layout_shade(scene, rows, width, config.keep_scene, mix, texture, brightness, bright, parts)
 
 
 def scene_colour_mix(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> float | ColourShare:
     """How much of its own colour each part of ``scene`` keeps under the texture (:func:`colour_share`):
     ``scene_colour``, raised by ``keep_accents`` for the rare, vivid colours among the splats of ``rows`` (all when
-    None) as they cover a view, and each one's hue against their mean by ``keep_hues``, when the run keeps anything
-    of the scene (else the texture alone)."""
+    None) as they cover a view, and ``keep_hues`` of each one's part's hue (:func:`layout_parts`), when the run
+    keeps anything of the scene (else the texture alone)."""
     if not keeps_scene(config) or (config.keep_accents <= 0 and config.keep_hues <= 0):
         return config.scene_colour
     part = slice(None) if rows is None else rows
@@ -433,15 +438,29 @@ def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: Trans
     return bright
 
 
-@torch.no_grad()
+def layout_parts(scene: GaussianScene, config: TransferConfig) -> torch.Tensor | None:
+    """(N, 3) the mean colour of the part ``find_parts`` puts each splat in, whose hue *Keep Hues* keeps, or None
+    with ``keep_hues`` 0 (or when the run keeps nothing of the scene)."""
+    if config.keep_hues <= 0.0 or not keeps_scene(config):
+        return None
+    parts = find_parts(scene)
+    return torch.from_numpy(parts.colours[parts.labels]).to(scene.means)
+
+
 def bright_images(scene: GaussianScene, views: ViewSet, bright: torch.Tensor, backend: str) -> list[torch.Tensor]:
     """(H, W) per view: ``bright`` (N, :func:`layout_bright`) as the view sees the splats, blended as their
     colours are, so a pixel's shade is taken against the material it shows."""
-    values = bright[:, None].expand(-1, 3).to(scene.means).contiguous()
+    return [image[..., 0] for image in seen_images(scene, views, bright[:, None].expand(-1, 3), backend)]
+
+
+@torch.no_grad()
+def seen_images(scene: GaussianScene, views: ViewSet, values: torch.Tensor, backend: str) -> list[torch.Tensor]:
+    """(H, W, 3) per view: the splats' ``values`` (N, 3) as the view sees them, blended as their colours are."""
+    values = values.to(scene.means).contiguous()
     images = []
     for camera in views.cameras:
         out = render(scene.detach(), [camera], colors=values, render_depth=False, backend=backend)
-        images.append(out.colors[0][..., 0] / out.alphas[0].clamp_min(1e-6))
+        images.append(out.colors[0] / out.alphas[0].clamp_min(1e-6)[..., None])
     return images
 
 

@@ -34,8 +34,10 @@ from .layout import (
     lay_out,
     layout_bright,
     layout_images,
+    layout_parts,
     layout_shading,
     scene_colour_mix,
+    seen_images,
     shade_width,
 )
 from .metrics import COVERED, MEASURE_SIDE, MEASURE_STRIDE, preview_ssim
@@ -245,9 +247,11 @@ def _prepare(plan: RunPlan) -> Prepared:
     bright = layout_bright(work, region, config) if laying else None
     # what of its own colour each part keeps, taken before the layout recolours the splats
     mix = scene_colour_mix(work, region, config) if laying else config.scene_colour
-    shade = layout_shading(work, region, frame, config, image, mix, bright) if laying else None
-    measured = bright is not None and config.lambda_layout > 0  # what the layout term's images take
-    lit = bright_images(work, plan.used, bright, config.backend) if measured else None
+    parts = layout_parts(work, config) if laying else None
+    shade = layout_shading(work, region, frame, config, image, mix, bright, parts) if laying else None
+    imaged = laying and config.lambda_layout > 0  # what the layout term's images take
+    lit = bright_images(work, plan.used, bright, config.backend) if imaged and bright is not None else None
+    hues = seen_images(work, plan.used, parts, config.backend) if imaged and parts is not None else None
     if config.color_transfer and not laying:  # the layout lays its own colours on every restyled splat
         work = apply_color_transfer(work, plan.content, image, region, config.backend)
     extractor = load_feature_extractor(
@@ -280,7 +284,7 @@ def _prepare(plan: RunPlan) -> Prepared:
     if laying and config.lambda_layout > 0:
         shaded, width = shade is not None, shade_width(frame, config)
         ideal = layout_images(
-            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, mix, exposure, lit
+            plan.used, image, frame, config.angle, shaded, width, config.keep_scene, mix, exposure, lit, hues
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
     return Prepared(plan, work, region, shade, extractor, targets, laid_out, start_view, n_work)

@@ -74,13 +74,15 @@ def layout_shade(
     texture: np.ndarray | None = None,
     brightness: float = 0.0,
     bright: torch.Tensor | None = None,
+    parts: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """(N, ``ROW``) what each splat of ``rows`` (all when None) keeps of the scene (:func:`kept_scene`): its colour,
     averaged over its neighbours within about ``softness`` (a world length, 0: its own), that colour's
     luminance over the bright end of those splats' (or over each splat's own ``bright`` (N,), the luminance its
-    material shows fully lit: :func:`material_bright`), to the power ``keep`` (:func:`shading`), and
-    ``brightness`` of the exposure that gives ``texture`` laid over them the scene's mean luminance
-    (:func:`brightness_exposure`, in stops); the other splats keep the texture as it is."""
+    material shows fully lit: :func:`material_bright`), to the power ``keep`` (:func:`shading`), its part's hue
+    (``parts`` (N, 3): each splat's part's mean colour, for *Keep Hues*), and ``brightness`` of the exposure that
+    gives ``texture`` laid over them the scene's mean luminance (:func:`brightness_exposure`, in stops); the other
+    splats keep the texture as it is."""
     colours = scene.base_colors.detach().clamp(0.0, 1.0)
     kept = kept_scene(torch.ones(len(scene), dtype=scene.dtype, device=scene.device), colours, 0.0)
     part = slice(None) if rows is None else rows
@@ -92,7 +94,8 @@ def layout_shade(
         seen = torch.stack([spatial_blur(points, seen[:, c], weights, softness) for c in range(3)], dim=1)
     luminance = luma(seen)
     lit_at = None if bright is None else bright[part].to(luminance)
-    mixed = kept_scene(shading(luminance, keep=keep, bright=lit_at), seen, colour)
+    of_parts = None if parts is None else parts[part].to(luminance)
+    mixed = kept_scene(shading(luminance, keep=keep, bright=lit_at), seen, colour, parts=of_parts)
     if texture is not None and brightness > 0:
         weights = coverage_weights(scene.scales.detach()[part], scene.opacities.detach()[part])
         mixed[:, 4] = brightness_exposure(texture, mixed, luminance, weights) ** brightness
@@ -176,16 +179,21 @@ def lit(colours: torch.Tensor, luminance: torch.Tensor, wanted: torch.Tensor) ->
 
 
 def kept_scene(
-    shade: torch.Tensor, colours: torch.Tensor, colour: float | ColourShare, exposure: float = 1.0
+    shade: torch.Tensor,
+    colours: torch.Tensor,
+    colour: float | ColourShare,
+    exposure: float = 1.0,
+    parts: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """(N, ``ROW``): the share of the texture's brightness (``shade``, (N,)) that stays once ``colour`` of the
     scene's own ``colours`` (N, 3) is mixed under it (one share for all, or each colour's own: :class:`ColourShare`),
-    what that mix adds, the mix's exposure (the scene's brightness, :func:`exposed`), and an accent's hue, which
-    the texture's luminance scales (:meth:`ColourShare.mixed`): what :func:`under_scene` applies."""
+    what that mix adds, the mix's exposure (the scene's brightness, :func:`exposed`), and an accent's and a part's
+    hue (``parts``: (N, 3) the mean colour of each one's part, or None), which the texture's luminance scales
+    (:meth:`ColourShare.mixed`): what :func:`under_scene` applies."""
     exposures = torch.full_like(shade[:, None], exposure)
     colours = colours.to(shade)
     if isinstance(colour, ColourShare):
-        share, added, hue = colour.mixed(colours, shade)
+        share, added, hue = colour.mixed(colours, shade, parts)
     else:
         share, added, hue = colour, colour * colours, torch.zeros_like(colours)
     return torch.cat([(1.0 - share) * shade[:, None], added, exposures, hue], dim=1)
