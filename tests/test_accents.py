@@ -106,7 +106,7 @@ def test_a_run_keeps_a_small_vivid_spot_its_colour_on_the_splats_the_preview_and
     scene, cam, spot = spotted_wall()
     grey = np.full((64, 64, 3), 0.3, np.float32)
     config = zero_step_config(
-        shared, tmp_path, keep_scene=1.0, scene_colour=0.15, keep_accents=keep, scene_brightness=0.0
+        shared, tmp_path, keep_scene=1.0, scene_colour=0.15, keep_accents=keep, keep_hues=0.0, scene_brightness=0.0
     )
     result = transfer(scene, grey, [cam], config)
     share = expected_share(0.15, keep, float(spot.float().mean()))

@@ -165,11 +165,12 @@ class TransferConfig(SpeedSettings):
         max=1.0,
     )
     keep_hues: float = setting(
-        0.0,
+        0.5,
         "Keep Hues",
         "How much each part's own hue tints the laid-out texture (pink icing on beige dough, an amber top above "
         "a dark neck), one hue per part and no change to its light and dark, so the texture keeps its pattern; "
-        "grey parts keep the texture's own hue; 0: the texture's hue everywhere",
+        "grey parts keep the texture's own hue; 0.5 keeps parts apart in colour; 1 more so, though saturated "
+        "parts show more colour speckle; 0: the texture's hue everywhere",
         "texture",
         min=0.0,
         max=1.0,
