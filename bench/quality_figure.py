@@ -5,6 +5,11 @@ bench/recognise.py run's saved held-out views and its measures.
         --presets fast --tag s27-figure
     .venv/bin/python bench/quality_figure.py --tag s27-figure [--view 0] [--out docs/quality_sheet.jpg]
 
+or from several runs' rows of some of their textures, a run's scenes in the order the tags are given:
+
+    .venv/bin/python bench/quality_figure.py --tag s41-hues05-fern s41-hues05 s41-hues05-robot \
+        --textures herringbone_wood brick_wall
+
 The preview is the layout start (what *Preview Orientation* shows), the result the run's; both, and the original,
 from the same held-out view the run never optimised. Under each result: its structure ranks among the ten
 textures (G: Gram, B: Gabor; found when both are top 3) and its content (luminance SSIM over the object's pixels).
@@ -61,12 +66,14 @@ def result_label(row: dict) -> str:
     return f"{found} G{row['gram_rank']} B{row['gabor_rank']} SSIM {row['content_ssim']:.2f}"
 
 
-def figure_rows(report: dict, variant: str, view: int, out: Path = OUT) -> list[np.ndarray]:
-    """One strip per (scene, texture) result of ``variant`` in ``report`` (its pictures under ``out``/<tag>):
-    texture | original | preview | result."""
+def figure_rows(
+    report: dict, variant: str, view: int, out: Path = OUT, textures: list[str] | None = None
+) -> list[np.ndarray]:
+    """One strip per (scene, texture) result of ``variant`` in ``report`` (its pictures under ``out``/<tag>), of
+    ``textures`` only when given: texture | original | preview | result."""
     strips = []
     for row in report["rows"]:
-        if row["variant"] != variant:
+        if row["variant"] != variant or (textures is not None and row["texture"] not in textures):
             continue
         scene, texture = row["scene"], row["texture"]
         folder = out / report["tag"] / scene
@@ -87,18 +94,25 @@ def figure_rows(report: dict, variant: str, view: int, out: Path = OUT) -> list[
     return strips
 
 
+def report(tag: str) -> dict:
+    """The bench/recognise.py report of ``tag``; a clear error naming its file when there is none."""
+    path = OUT / f"{tag}.json"
+    if not path.is_file():
+        raise SystemExit(f"{path}: no such report; run bench/recognise.py --tag {tag} first")
+    return json.loads(path.read_text())
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--tag", required=True, help="a bench/recognise.py run's tag")
+    parser.add_argument("--tag", nargs="+", required=True, help="bench/recognise.py runs' tags, drawn in this order")
+    parser.add_argument("--textures", nargs="+", help="draw only these textures (default: every one a run has)")
     parser.add_argument("--variant", default="fast-s0", help="which results: <preset>-s<seed> (default fast-s0)")
     parser.add_argument("--view", type=int, default=0, help="which held-out view (default 0)")
     parser.add_argument("--out", type=Path, default=FIGURE)
     args = parser.parse_args()
-    report_path = OUT / f"{args.tag}.json"
-    if not report_path.is_file():
-        raise SystemExit(f"{report_path}: no such report; run bench/recognise.py --tag {args.tag} first")
-    report = json.loads(report_path.read_text())
-    image = np.vstack(figure_rows(report, args.variant, args.view))
+    image = np.vstack(
+        [strip for tag in args.tag for strip in figure_rows(report(tag), args.variant, args.view, OUT, args.textures)]
+    )
     args.out.parent.mkdir(parents=True, exist_ok=True)
     ok, data = cv2.imencode(".jpg", cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, QUALITY])
     if not ok:

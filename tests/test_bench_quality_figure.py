@@ -47,3 +47,18 @@ def test_each_result_is_a_strip_of_texture_original_preview_and_result_from_one_
     assert [int(strip[middle, k * SIDE + middle, 0]) for k in (1, 2, 3)] == list(colours.values())
     with pytest.raises(SystemExit, match=r"original-v0\.png: no such picture"):
         figure_rows(report, "fast-s0", 0, tmp_path)
+
+
+def test_only_the_textures_asked_for_are_drawn(tmp_path):
+    folder = tmp_path / "t" / "donut"
+    folder.mkdir(parents=True)
+    rows = []
+    for grey, texture in ((60, "brick_wall"), (180, "honeycomb")):
+        for name in ("original-v0", f"{texture}-layout-start-v0", f"{texture}-fast-s0-v0"):
+            cv2.imwrite(str(folder / f"{name}.png"), np.full((64, 96, 3), grey, np.uint8))
+        ranks = {"gram_rank": 1, "gabor_rank": 1, "content_ssim": 0.5}
+        rows.append({"scene": "donut", "texture": texture, "variant": "fast-s0", **ranks})
+    report = {"tag": "t", "rows": rows, "scenes": {"donut": {"preview": {"fast": {"reference": "layout-start"}}}}}
+    assert len(figure_rows(report, "fast-s0", 0, tmp_path)) == 2
+    (strip,) = figure_rows(report, "fast-s0", 0, tmp_path, ["honeycomb"])
+    assert int(strip[SIDE // 2, 3 * SIDE + SIDE // 2, 0]) == 180
