@@ -787,13 +787,13 @@ def test_scene_colour_mixes_each_part_s_own_colour_under_the_texture(shared, tmp
     assert ideal[:, : 96 // 2 - 6, :3][covered].mean(0).numpy() == pytest.approx(left, abs=0.02)
 
 
-@pytest.mark.parametrize("colour, hues", [(0.3, 0.0), (0.0, 0.0), (0.0, 0.5)])
+@pytest.mark.parametrize("colour, hues", [(0.3, 0.0), (0.0, 0.0), (0.0, None)])
 def test_a_whole_run_keeps_parts_that_differ_only_in_hue_apart(shared, tmp_path, colour, hues):
     """The two-hue wall under a flat grey texture, a whole short run with every default of the method: at Scene
     Colour 0.3 the halves stay apart along their colours' difference by half to all of Scene Colour's share
     (the start holds all of it, 12 steps of the grey texture's pull keep about two thirds); at 0, with Keep Hues
-    0, they come out alike (Keep Scene keeps luminance, and theirs is nearly one), and with Keep Hues 0.5 they stay
-    apart by half to all of the hue shift the start holds (worked out by hand)."""
+    0, they come out alike (Keep Scene keeps luminance, and theirs is nearly one), and with Keep Hues at its
+    default (None) they stay apart by half to all of the hue shift the start holds (worked out by hand)."""
     from gt2gs_blender.core.api import transfer
 
     scene, cam = two_hue_wall()
@@ -806,12 +806,12 @@ def test_a_whole_run_keeps_parts_that_differ_only_in_hue_apart(shared, tmp_path,
         scene_colour=colour,
         scene_brightness=0.0,
         background=(0, 0, 0),
-        keep_hues=hues,
+        **({} if hues is None else {"keep_hues": hues}),
     )
     shown = render(transfer(scene, grey, [cam], config).scene, [cam], background=torch.zeros(3)).colors[0]
     difference = (shown[16:80, 8 : 48 - 8].mean((0, 1)) - shown[16:80, 48 + 8 : 96 - 8].mean((0, 1))).numpy()
-    if hues > 0:  # each half starts as the grey 0.5 shaded, its hue moved by Keep Hues of its own, by hand
-        luma, keep = np.array([0.2126, 0.7152, 0.0722]), hues
+    if hues is None:  # each half starts as the grey 0.5 shaded, its hue moved by Keep Hues of its own, by hand
+        luma, keep = np.array([0.2126, 0.7152, 0.0722]), TransferConfig().keep_hues
         bright = max(float(np.dot(PINK, luma)), float(np.dot(BLUE, luma)))
         start = [
             float(np.dot(c, luma)) / bright * 0.5 * (1.0 + keep * (np.array(c) / np.dot(c, luma) - 1.0))

@@ -165,7 +165,7 @@ class TransferConfig(SpeedSettings):
         max=1.0,
     )
     keep_hues: float = setting(
-        0.0,
+        0.5,
         "Keep Hues",
         "How much each part's own hue tints the laid-out texture (pink icing on beige dough, an amber top above "
         "a dark neck), one hue per part and no change to its light and dark, so the texture keeps its pattern; "
