@@ -687,6 +687,27 @@ def test_keep_material_zero_gives_each_part_the_texture_s_brightness_and_keeps_t
     assert float(ratio) == pytest.approx(1 / 6, abs=0.01)
 
 
+@pytest.mark.parametrize(("keep_material", "keep_hues"), [(0.0, 0.5), (0.0, 0.0), (1.0, 0.5), (1.0, 0.0)])
+def test_layout_materials_finds_the_parts_once_and_gives_what_each_alone_gives(monkeypatch, keep_material, keep_hues):
+    """The two-material wall: the shade's bright ends and the parts' colours taken together equal each taken alone,
+    and the parts search (the slow step on a capture) runs once when either is wanted, not at all when neither."""
+    from gt2gs_blender.core.scene import parts as parts_module
+    from gt2gs_blender.core.transfer import layout
+
+    scene, _ = two_material_wall()
+    config = TransferConfig(layout=True, keep_material=keep_material, keep_hues=keep_hues)
+    bright_alone, parts_alone = layout.layout_bright(scene, None, config), layout.layout_parts(scene, config)
+    calls = []
+    monkeypatch.setattr(layout, "find_parts", lambda s: calls.append(s) or parts_module.find_parts(s))
+    bright, parts = layout.layout_materials(scene, None, config)
+    assert len(calls) == int(keep_material < 1.0 or keep_hues > 0.0)
+    for together, alone in ((bright, bright_alone), (parts, parts_alone)):
+        assert (together is None) == (alone is None)
+        if alone is not None:
+            assert torch.equal(together, alone)
+    assert (bright is None) == (keep_material >= 1.0) and (parts is None) == (keep_hues <= 0.0)
+
+
 def test_material_bright_is_each_part_s_median_against_the_scene_s_bright_end():
     """Two parts, luminance 0.1-0.3 and 0.5-0.9: Keep Material 1 takes the scene's bright end (its 95th
     percentile) everywhere, 0 each part's median, 0.5 their geometric mean; a part of one splat is its own."""

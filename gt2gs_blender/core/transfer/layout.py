@@ -50,7 +50,7 @@ from ..features.specs import RENDER_SCALE
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..scene.inria import SH_C0
-from ..scene.parts import find_parts
+from ..scene.parts import Parts, find_parts
 from .accents import ColourShare, colour_share
 from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
@@ -423,27 +423,39 @@ def scene_colour_mix(scene: GaussianScene, rows: torch.Tensor | None, config: Tr
     return colour_share(colours, weights, config.scene_colour, config.keep_accents, config.keep_hues)
 
 
-def layout_bright(scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig) -> torch.Tensor | None:
+def layout_materials(
+    scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig
+) -> tuple[torch.Tensor | None, torch.Tensor | None]:
+    """(:func:`layout_bright`, :func:`layout_parts`) of ``scene``, its parts found once for both (each None where its
+    setting keeps nothing)."""
+    wanted = keeps_scene(config) and (config.keep_material < 1.0 or config.keep_hues > 0.0)
+    found = find_parts(scene) if wanted else None
+    return layout_bright(scene, rows, config, found), layout_parts(scene, config, found)
+
+
+def layout_bright(
+    scene: GaussianScene, rows: torch.Tensor | None, config: TransferConfig, found: Parts | None = None
+) -> torch.Tensor | None:
     """(N,) the luminance each splat's material shows fully lit (:func:`material_bright` over the parts
-    ``find_parts`` finds, among the splats of ``rows``; the others take the bright end), or None with
+    ``find_parts`` finds, or ``found``, among the splats of ``rows``; the others take the bright end), or None with
     ``keep_material`` 1 (the whole scene's bright end, as the shade takes it then)."""
     if config.keep_material >= 1.0 or not keeps_scene(config):
         return None
     colours = scene.base_colors.detach().clamp(0.0, 1.0)
     luminance = luma(colours)
-    labels = torch.from_numpy(find_parts(scene).labels).to(luminance.device)
+    labels = torch.from_numpy((found if found is not None else find_parts(scene)).labels).to(luminance.device)
     part = torch.ones_like(labels, dtype=torch.bool) if rows is None else rows.to(labels.device)
     bright = torch.full_like(luminance, bright_end(luminance[part]))
     bright[part] = material_bright(luminance[part], labels[part], config.keep_material)
     return bright
 
 
-def layout_parts(scene: GaussianScene, config: TransferConfig) -> torch.Tensor | None:
-    """(N, 3) the mean colour of the part ``find_parts`` puts each splat in, whose hue *Keep Hues* keeps, or None
-    with ``keep_hues`` 0 (or when the run keeps nothing of the scene)."""
+def layout_parts(scene: GaussianScene, config: TransferConfig, found: Parts | None = None) -> torch.Tensor | None:
+    """(N, 3) the mean colour of the part ``find_parts`` (or ``found``) puts each splat in, whose hue *Keep Hues*
+    keeps, or None with ``keep_hues`` 0 (or when the run keeps nothing of the scene)."""
     if config.keep_hues <= 0.0 or not keeps_scene(config):
         return None
-    parts = find_parts(scene)
+    parts = found if found is not None else find_parts(scene)
     return torch.from_numpy(parts.colours[parts.labels]).to(scene.means)
 
 

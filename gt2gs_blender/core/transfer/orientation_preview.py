@@ -29,7 +29,7 @@ from ..scene.gaussians import GaussianScene
 from .accents import ColourShare
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
-from .layout import lay_out, layout_bright, layout_parts, layout_shading, scene_colour_mix
+from .layout import lay_out, layout_materials, layout_shading, scene_colour_mix
 from .losses import luma
 from .plan import RunPlan, plan_run
 from .region import assemble
@@ -129,7 +129,7 @@ def laid_out_start(plan: RunPlan) -> GaussianScene:
     config, frame, texture = plan.config, plan.frame, plan.texture
     work, region = plan.work, plan.region
     mix = scene_colour_mix(work, region, config)
-    bright, parts = layout_bright(work, region, config), layout_parts(work, config)
+    bright, parts = layout_materials(work, region, config)
     shade = layout_shading(work, region, frame, config, texture, mix, bright, parts)
     laid = lay_out(work, region, plan.content, texture, frame, config, shade)
     if config.split_size > 0:

@@ -32,9 +32,8 @@ from .detail import add_detail, split_for_detail
 from .layout import (
     bright_images,
     lay_out,
-    layout_bright,
     layout_images,
-    layout_parts,
+    layout_materials,
     layout_shading,
     scene_colour_mix,
     seen_images,
@@ -244,10 +243,9 @@ def _prepare(plan: RunPlan) -> Prepared:
     work, region = plan.work, plan.region
     # the scene's own light and shade, as the preview takes it
     laying = frame is not None and config.layout
-    bright = layout_bright(work, region, config) if laying else None
+    bright, parts = layout_materials(work, region, config) if laying else (None, None)
     # what of its own colour each part keeps, taken before the layout recolours the splats
     mix = scene_colour_mix(work, region, config) if laying else config.scene_colour
-    parts = layout_parts(work, config) if laying else None
     shade = layout_shading(work, region, frame, config, image, mix, bright, parts) if laying else None
     imaged = laying and config.lambda_layout > 0  # what the layout term's images take
     lit = bright_images(work, plan.used, bright, config.backend) if imaged and bright is not None else None
