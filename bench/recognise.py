@@ -28,6 +28,11 @@ promised). The preview is the layout start when ``layout`` is on, else the scree
 shows (``orientation_preview.sketch``: its texture size, depth groups and kept scene; a ``sketch`` row);
 ``preview_reference`` names it.
 
+Each row's ``gram_margin`` / ``gabor_margin`` say how far its texture stands inside (> 0) or outside the top 3
+(``recognise_measure.margin_of``: a share of the threshold's distance); the table's "edge" is the smaller, the one
+that decides "found", and each summary names the texture nearest to flipping ("nearest flip"): the fern's woven
+straw at `balanced` lies 0.1-0.5 % from it, within what float32 rounding moves (docs/quality_log.md, session 42).
+
 Beside the ranks, every row with renders reports ``content_ssim`` ("scene SSIM"): the luminance SSIM of its held-out
 views to the original scene's, on the object's pixels: how much of the user's scene still shows under the texture
 (the structure measures reward the texture alone; this is the other side of the trade). The original row is 1 by
@@ -57,6 +62,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 import time
@@ -319,6 +325,7 @@ def row(scene: str, texture: str, variant: str, dist: dict[str, Any], seconds: f
         "texture": texture,
         "variant": variant,
         **{f"{m}_rank": measure.rank_of(dist[m], texture) for m in MEASURES},
+        **{f"{m}_margin": measure.margin_of(dist[m], texture, TOP) for m in MEASURES},
         "seconds": seconds,
         "distances": dist,
     }
@@ -607,6 +614,9 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
             s[f"top1_{m}"] += r[f"{m}_rank"] == 1
             s[f"top{TOP}_{m}"] += r[f"{m}_rank"] <= TOP
         s[f"top{TOP}_both"] += all(r[f"{m}_rank"] <= TOP for m in MEASURES)
+        edge = decisive_margin(r)
+        if abs(edge) < abs(s.get("nearest_flip", math.inf)):
+            s["nearest_flip"], s["nearest_flip_texture"] = edge, r["texture"]
         for key in SUMMED:
             if key in r:
                 s.setdefault(f"{key}_values", []).append(r[key])
@@ -618,6 +628,12 @@ def summarise(rows: list[dict]) -> dict[str, dict[str, dict]]:
                 if key == "content_ssim_values":  # the texture that keeps the least of the scene, hidden by the mean
                     s["least_content_ssim"] = float(np.nanmin(values))
     return out
+
+
+def decisive_margin(r: dict) -> float:
+    """The margin (``measure.margin_of``) that decides whether row ``r``'s texture is found under both measures:
+    the smaller of the two; >= 0 when found, and its size the share the distances must move to change that."""
+    return min(r.get(f"{m}_margin", math.nan) for m in MEASURES)
 
 
 def target_met(summary: dict[str, dict[str, dict]]) -> dict[str, bool]:
@@ -672,8 +688,8 @@ def is_transfer(variant: str) -> bool:
 
 def print_table(rows: list[dict], summary: dict) -> None:
     print(
-        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'seconds':>8} {'scene SSIM':>10} "
-        f"{'specks':>6} {'accents':>7} {'hues':>5}   from preview gram / gabor (original's)"
+        f"\n{'scene':6} {'texture':17} {'variant':18} {'gram':>4} {'gabor':>5} {'edge':>6} {'seconds':>8} "
+        f"{'scene SSIM':>10} {'specks':>6} {'accents':>7} {'hues':>5}   from preview gram / gabor (original's)"
     )
     for r in rows:
         sec = "" if r["seconds"] is None else f"{r['seconds']:.0f}"
@@ -684,7 +700,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
                 preview += f" ({r['original_preview_gram']:.3f} / {r['original_preview_gabor']:.3f})"
             preview += f" vs {r['preview_reference']}"
         print(
-            f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} {sec:>8} "
+            f"{r['scene']:6} {r['texture']:17} {r['variant']:18} {r['gram_rank']:>4} {r['gabor_rank']:>5} "
+            f"{decisive_margin(r):>+6.1%} {sec:>8} "
             f"{r['content_ssim']:>10.3f} {r['colour_specks']:>6.3f} {r['accent_shift']:>7.1f} "
             f"{r.get('part_hues', float('nan')):>5.2f}   {preview}"
         )
@@ -697,6 +714,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
     for scene, variants in summary.items():
         for variant, s in variants.items():
             tail = f"   splats {s['mean_splats']:,.0f}" if "mean_splats" in s else ""
+            if "nearest_flip" in s:
+                tail += f"   nearest flip {s['nearest_flip_texture']} {s['nearest_flip']:+.1%}"
             if "mean_original_preview_gram" in s:
                 tail += (
                     f"   from preview {s['mean_preview_gram']:.3f} / {s['mean_preview_gabor']:.3f} "

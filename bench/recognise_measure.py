@@ -400,3 +400,14 @@ def distances(view: ViewStats, textures: Sequence[TextureStats]) -> dict[str, di
 def rank_of(scores: dict[str, float], name: str) -> int:
     """1-based position of ``name`` among ``scores`` sorted by increasing distance."""
     return 1 + sum(v < scores[name] for k, v in scores.items() if k != name)
+
+
+def margin_of(scores: dict[str, float], name: str, top: int) -> float:
+    """How far ``name`` stands inside (> 0) or outside (< 0) the first ``top`` of ``scores``: the ``top``-th
+    smallest distance among the others less its own, over that distance. ``rank_of <= top`` exactly when it is
+    >= 0; its own distance moving by less than this share of the threshold's (the others held) keeps it there."""
+    others = sorted(v for k, v in scores.items() if k != name)
+    if len(others) < top:
+        return float("inf")
+    edge = others[top - 1]
+    return (edge - scores[name]) / edge if edge > 0 else float("-inf") if scores[name] > edge else 0.0

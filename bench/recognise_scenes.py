@@ -36,10 +36,11 @@ from gt2gs_blender.core.cameras.warp import expected_depth
 from gt2gs_blender.core.fit.trainer import DEFAULT_POINTS, DEFAULT_SH_DEGREE, LLFF_HOLDOUT, FitConfig, fit_llff
 from gt2gs_blender.core.transfer.layout import (
     bright_images,
-    layout_bright,
     layout_images,
+    layout_materials,
     layout_shading,
     scene_colour_mix,
+    seen_images,
     shade_width,
 )
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
@@ -153,11 +154,12 @@ def layout_surface(
     assert run.frame is not None and run.config.layout
     config, photo = run.config, run_texture(texture, run.config)
     views = surface_views(bench, config.backend) if views is None else views
-    bright = layout_bright(run.work, run.region, config) if shaded else None
+    bright, parts = layout_materials(run.work, run.region, config) if shaded else (None, None)
     mix = scene_colour_mix(run.work, run.region, config)
-    kept = layout_shading(run.work, run.region, run.frame, config, photo, mix, bright) if shaded else None
+    kept = layout_shading(run.work, run.region, run.frame, config, photo, mix, bright, parts) if shaded else None
     exposure = 1.0 if kept is None else laid_exposure(kept, run.region)
     lit = None if bright is None else bright_images(run.work, views, bright, config.backend)
+    hues = None if parts is None else seen_images(run.work, views, parts, config.backend)
     laid = layout_images(
         views,
         photo,
@@ -169,6 +171,7 @@ def layout_surface(
         mix,
         exposure,
         lit,
+        hues,
     )
     out = []
     for image in laid:

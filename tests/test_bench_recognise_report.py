@@ -110,3 +110,21 @@ def test_the_summary_gives_the_saved_files_splats_and_older_reports_still_print(
     lines = capsys.readouterr().out.splitlines()
     assert any(line.startswith("  donut") and line.endswith("splats 302,500") for line in lines)
     assert any(line.startswith("  guitar") and "splats" not in line for line in lines)
+
+
+def test_the_summary_names_the_texture_nearest_to_flipping_from_rows_made_by_row():
+    """Rows made by ``recognise.row`` from distances (seven others at 1.0-1.6, so the threshold is 1.2): one texture
+    inside the top 3 by 20 % under Gram but 1 % under Gabor, one outside by 5 %, one far outside; the summary's
+    nearest flip is the first, at its smaller margin, and a row without margins (an older report's) is passed over."""
+    others = {f"other{k}": 1.0 + 0.1 * k for k in range(7)}
+
+    def made(texture: str, gram: float, gabor: float) -> dict:
+        at = {"gram": gram, "gabor": gabor}
+        return recognise.row("s", texture, "fast-s0", {m: {**others, texture: at[m] * 1.2} for m in at})
+
+    rows = [made("near", 0.8, 0.99), made("out", 1.05, 1.05), made("far", 2.5, 2.5), {**rows_for("s", 0)[0]}]
+    assert (rows[0]["gram_rank"], rows[0]["gabor_rank"], rows[1]["gabor_rank"]) == (1, 3, 4)
+    summary = recognise.summarise(rows)["s"]["fast-s0"]
+    assert summary["nearest_flip_texture"] == "near"
+    assert summary["nearest_flip"] == pytest.approx(0.01)
+    assert recognise.decisive_margin(rows[1]) == pytest.approx(-0.05)

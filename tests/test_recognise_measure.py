@@ -106,3 +106,24 @@ def test_image_to_image_distance_is_zero_for_the_same_image_and_grows_when_the_t
     disc = ((yy - 80) ** 2 + (xx - 80) ** 2 < 60**2).astype(np.float32)
     partial = measure.pair_distance(still, measure.view_stats(picture("brick_wall", 96, 0.0), disc))
     assert 0 < partial["windows"] < still.n_windows  # only the windows both images cover
+
+
+def test_margin_of_is_the_share_the_distances_must_move_and_agrees_with_rank_of():
+    """Analytic: ten distances 1..10, the texture at 2.5 sits inside the top 3 by (3 - 2.5) / 3 (the third of the
+    others is 3); at 3.5 outside by 0.5 / 3. On random distances the sign agrees with ``rank_of`` at every
+    threshold, and the texture's own distance moved by just under the margin's share of the threshold's keeps it
+    inside, by just over moves it out."""
+    scores = {f"t{k}": float(k) for k in (1, 2, 3, 4, 5, 6, 7, 8, 9, 10)}
+    assert measure.margin_of({**scores, "me": 2.5}, "me", 3) == pytest.approx(1 / 6)
+    assert measure.margin_of({**scores, "me": 3.5}, "me", 3) == pytest.approx(-1 / 6)
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        values = {f"t{k}": float(v) for k, v in enumerate(rng.uniform(0.1, 1.0, 10))}
+        name = "t0"
+        for top in (1, 3, 5):
+            edge = measure.margin_of(values, name, top)
+            assert (edge >= 0) == (measure.rank_of(values, name) <= top)
+            if edge > 0:
+                for factor, inside in ((1 + 0.99 * edge / (1 - edge), True), (1 + 1.01 * edge / (1 - edge), False)):
+                    moved = {**values, name: values[name] * factor}
+                    assert (measure.rank_of(moved, name) <= top) == inside
