@@ -42,7 +42,8 @@ object's pixels whose hue stands out from their neighbourhood: colour noise a ru
 scene's own: sprinkles, flowers). ``accent_shift`` ("accents") is how far the original's small, vivid features (a
 robot's eyes, sprinkles) moved in colour (Lab a, b; NaN where a scene has none). ``part_hues`` ("hues") is whether
 the parts keep their hues apart at the object's scale (1: as in the original, whatever tint the texture gives the
-whole; 0: one hue for all).
+whole; 0: one hue for all). ``hue_drift`` ("drift") is how far the optimisation moved the hues from the run's start
+(Lab a, b; 0 where its steps only lightened or darkened): patches of a hue neither the texture nor the scene has.
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -116,6 +117,7 @@ SUMMED = (
     "colour_specks",
     "accent_shift",
     "part_hues",
+    "hue_drift",
     "splats",
 )
 """The row fields a summary averages per scene and variant."""
@@ -131,6 +133,9 @@ ACCENT_WINDOW = 21
 HUE_FLOOR = 2.0
 """``part_hues``: Lab (a, b) units, about one just-noticeable difference: hue differences between parts within this
 count as none (a scene of one hue has nothing to keep, and a texture's faint tint does not count against it)."""
+HUE_DRIFT_BLUR = 1.0 / 256.0
+"""``hue_drift``: the blur (a share of the view's longest side, 1 px at 256) under which a patch of hue counts and
+a texture's own finest colour steps mostly do not."""
 TILE = 160
 SHEET_VIEWS = 2
 """Held-out views per result on the contact sheet."""
@@ -253,6 +258,24 @@ def accent_shift(views: Views, original: Views) -> float:
         )
         shifts.extend(np.linalg.norm(ab[accent] - ab_then[accent], axis=-1))
     return float(np.mean(shifts)) if shifts else float("nan")
+
+
+def hue_drift(views: Views, start: Views, original: Views) -> float:
+    """Hue the optimisation painted of its own (the guitar's pink and green patches under woven straw): the mean Lab
+    (a, b) distance of each held-out view to the same view of the run's start (the laid-out splats before any
+    step), both blurred by ``HUE_DRIFT_BLUR``, over the original's object pixels, pooled over the views; 0 where
+    the steps only lightened or darkened. Judged on renders no loss sees (the layout term holds the start's exact
+    surface, not its splats); NaN without a start (the layout off)."""
+    drifts = []
+    for (rgb, _), (then, _), (_, alpha) in zip(views, start, original, strict=True):
+        mask = alpha > measure.MASK_ALPHA
+        sigma = HUE_DRIFT_BLUR * max(alpha.shape)
+        ab, ab_then = (
+            cv2.GaussianBlur(cv2.cvtColor(measure.to_float(x), cv2.COLOR_RGB2Lab)[..., 1:], (0, 0), sigma)
+            for x in (rgb, then)
+        )
+        drifts.extend(np.linalg.norm(ab - ab_then, axis=-1)[mask])
+    return float(np.mean(drifts)) if drifts else float("nan")
 
 
 def part_hues(views: Views, original: Views) -> float:
@@ -445,11 +468,15 @@ def measured_row(
 
 
 def calibration_rows(
-    run: SceneRun, texture: str, tiles: list[np.ndarray], previews: dict[str, list[measure.ViewStats]]
+    run: SceneRun,
+    texture: str,
+    tiles: list[np.ndarray],
+    previews: dict[str, list[measure.ViewStats]],
+    started: dict[str, Views],
 ) -> list[dict]:
     """The texture shown to the measure without a transfer: projected in screen space at each height, and for each
     preset its preview (the layout start, the run's target and the texture alone on the exact surface, or the
-    sketch); fills ``previews`` (variant -> view statistics) and ``tiles``."""
+    sketch); fills ``previews`` (variant -> view statistics), ``started`` (the layout starts' views) and ``tiles``."""
     rows = []
     path = texture_path(texture)
     base_config = preset(run.args.presets[0], **run.args.overrides)
@@ -469,6 +496,7 @@ def calibration_rows(
             tiles.append(tile(views[0][0], ranks_label(rows[-1], "sketch")))
             continue
         views = held_out_renders(layout_start(plan, path), run.bench)
+        started[variant] = views
         previews[variant] = view_stats(views)
         rows.append(measured_row(run, texture, variant, views, previews[variant], time.perf_counter() - t0))
         tiles.append(tile(views[0][0], ranks_label(rows[-1], variant.removesuffix("-start"))))
@@ -515,6 +543,7 @@ def result_row(
     preset_name: str,
     seed: int,
     previews: dict[str, list[measure.ViewStats]],
+    started: dict[str, Views],
     original_row: dict,
     tiles: list[np.ndarray],
 ) -> dict:
@@ -530,6 +559,8 @@ def result_row(
     t["features"] = features
     t["splats"] = len(result_scene)  # what the saved file holds: the split's cost beside its seconds
     t.update(scene_side(views, run.original_views))
+    start = started.get(reference)
+    t["hue_drift"] = float("nan") if start is None else hue_drift(views, start, run.original_views)
     t.update(preview_fields(from_preview(result_stats, previews[reference]), reference, run.starts[preset_name]))
     scale = (
         {m: original_row[f"preview_{m}"] for m in MEASURES}
@@ -565,7 +596,8 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
         image = cv2.cvtColor(cv2.imread(str(texture_path(texture))), cv2.COLOR_BGR2RGB)
         tiles = sheet[texture] = [tile(image, texture)]
         previews: dict[str, list[measure.ViewStats]] = {}
-        rows += calibration_rows(run, texture, tiles, previews)
+        started: dict[str, Views] = {}
+        rows += calibration_rows(run, texture, tiles, previews, started)
         r = row(name, texture, "original", run.original)
         r.update(scene_side(run.original_views, run.original_views))  # content 1: the original is the scene
         r.update(preview_fields(from_preview(run.original_stats, previews[first]), first, run.starts[args.presets[0]]))
@@ -575,7 +607,7 @@ def run_scene(name: str, args: argparse.Namespace, stats: list[measure.TextureSt
             continue
         for preset_name in args.presets:
             for seed in args.seeds:
-                rows.append(result_row(run, texture, preset_name, seed, previews, r, tiles))
+                rows.append(result_row(run, texture, preset_name, seed, previews, started, r, tiles))
     write_sheet(OUT / f"{output_name(args)}-{name}.png", sheet)
     return rows, {
         "held_out": [c.name for c in run.bench.held_out],
@@ -709,7 +741,7 @@ def print_table(rows: list[dict], summary: dict) -> None:
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
         "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean), "
         "accents (Lab a, b shift of the original's small, vivid features; mean), hues (the parts' hues kept apart, "
-        "1 = as the original; mean)"
+        "1 = as the original; mean), drift (Lab a, b the steps moved the hues from the start; mean)"
     )
     for scene, variants in summary.items():
         for variant, s in variants.items():
@@ -726,7 +758,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
                 f"{s[f'top{TOP}_both']}/{s['n']}   (top 1: {s['top1_gram']} / {s['top1_gabor']})   "
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
                 f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}   "
-                f"hues {s.get('mean_part_hues', float('nan')):.2f}{tail}"
+                f"hues {s.get('mean_part_hues', float('nan')):.2f}   "
+                f"drift {s.get('mean_hue_drift', float('nan')):.2f}{tail}"
             )
     met = target_met(summary)
     for key, ok in met.items():

@@ -104,6 +104,25 @@ def test_accent_shift_is_how_far_small_vivid_features_moved_in_colour():
     assert np.isnan(recognise.accent_shift([(grey, alpha)], [(grey, alpha)]))
 
 
+def test_hue_drift_is_the_hue_the_steps_added_over_the_object_and_not_its_light():
+    """The bench's hue drift: a result the same as its start is 0; one whose object half turned from amber to pink is
+    that (a, b) distance (cv2's Lab of the two colours) within 1 % (the column at the seam blurs into the backdrop),
+    the backdrop itself never counted; a stripe pattern finer than the blur, in its start's hues, counts for little."""
+    alpha = np.zeros((64, 128), np.float32)
+    alpha[:, :64] = 1.0
+    start = np.full((64, 128, 3), (190, 150, 90), np.uint8)
+    start[:, 64:] = (20, 200, 20)  # the backdrop: never counted, whatever it does
+    pink = start.copy()
+    pink[:, :64], pink[:, 64:] = (200, 120, 150), (200, 20, 200)
+    lab = cv2.cvtColor(np.array([[[190, 150, 90], [200, 120, 150]]], np.float32) / 255.0, cv2.COLOR_RGB2Lab)[0, :, 1:]
+    assert recognise.hue_drift([(start, alpha)], [(start, alpha)], [(start, alpha)]) == 0.0
+    drift = recognise.hue_drift([(pink, alpha)], [(start, alpha)], [(start, alpha)])
+    assert drift == pytest.approx(float(np.linalg.norm(lab[0] - lab[1])), rel=0.01)
+    fine = start.copy()
+    fine[:, :64:2] = (170, 134, 80)  # the start's own hue, darker, every other column
+    assert recognise.hue_drift([(fine, alpha)], [(start, alpha)], [(start, alpha)]) < 0.1 * drift
+
+
 def test_part_hues_keep_parts_apart_whatever_tint_the_whole_takes():
     """The bench's part-hue measure: a pink and a beige half of like light (icing on dough) kept are 1, and 1 still
     under a tint over the whole; both halves one hue is near 0 (the floor's share alone); the hues swapped is
