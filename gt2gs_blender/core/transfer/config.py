@@ -346,6 +346,14 @@ class TransferConfig(SpeedSettings):
         min=0.0,
         soft_max=10.0,
     )
+    texture_keeps_hue: bool = setting(
+        False,
+        "Texture Loss Keeps Hue",
+        "The texture loss (and the content loss beside it) may only lighten or darken the splats, so it sharpens the "
+        "texture's pattern without painting hues of its own (pink and green patches on a dark capture); the hues "
+        "come from the laid-out texture and the scene; off: it may change hue too, as the paper's does",
+        "stylise",
+    )
     lambda_content: float = setting(
         0.005,
         "Content Strength",

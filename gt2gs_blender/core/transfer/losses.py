@@ -62,6 +62,13 @@ def _blockwise_argmax(q: torch.Tensor, m: torch.Tensor, chunk_bytes: int) -> tor
     return best
 
 
+def light_only(image: torch.Tensor) -> torch.Tensor:
+    """``image`` (..., 3) unchanged, whose gradient reaches its channels only as one even shift of all three (lighter
+    or darker, its hue untouched): what the feature losses see under *Texture Loss Keeps Hue*."""
+    grey = image.mean(-1, keepdim=True)
+    return image.detach() + (grey - grey.detach())
+
+
 def content_loss(feats: torch.Tensor, content_feats: torch.Tensor) -> torch.Tensor:
     """Mean squared difference between rendered and content features (any matching shapes)."""
     return F.mse_loss(feats, content_feats)

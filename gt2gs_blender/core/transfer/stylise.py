@@ -44,7 +44,7 @@ from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
 from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig, splits_first
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
-from .losses import anisotropy, content_loss, cosine_distance, layout_loss, scale_regulariser, tv_loss
+from .losses import anisotropy, content_loss, cosine_distance, layout_loss, light_only, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
 
 GEOMETRY = ("means", "quats", "log_scales", "opacity_logits")
@@ -238,7 +238,8 @@ class Styliser:
         self.opt.set_trainable(self.colors + GEOMETRY if self.report.moved_splats else self.colors)
         out = self._stylise_render(v, view)
         image = out.colors[0]
-        feats, area = self._features(v, view, image, out.alphas[0].detach())
+        seen = light_only(image) if cfg.texture_keeps_hue else image
+        feats, area = self._features(v, view, seen, out.alphas[0].detach())
         self.report.feature_area += (area - self.report.feature_area) / (self.report.stylise_steps + 1)
         style = self._texture_loss(feats[0], v, view, nnfm) if cfg.lambda_style > 0 else None
         loss = (
