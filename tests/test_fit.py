@@ -80,6 +80,41 @@ def test_adam_matches_torch_adam():
         torch.testing.assert_close(ours.scene.tensors()[name], reference[name], rtol=1e-5, atol=1e-6)
 
 
+@pytest.mark.parametrize("shared", [True, False])
+def test_shared_channels_step_each_colour_where_its_momentum_points(shared):
+    """``shared_channels``: after a history that differs per channel (R alone, then grey gradients), each colour's
+    step is its momentum times one positive number for R, G and B, by a float64 re-derivation of Adam with the
+    second moment's channel mean as divisor; per element (not shared) the same history turns the step's hue away."""
+    scene = random_scene(12)
+    colours = ("sh_dc", "sh_rest")
+    lr = 1e-2
+    opt = GaussianAdam(scene, dict.fromkeys(PARAM_NAMES, lr), trainable=colours, shared_channels=colours if shared else ())
+    g = torch.Generator().manual_seed(3)
+    m = {k: torch.zeros_like(getattr(scene, k), dtype=torch.float64) for k in colours}
+    v = {k: torch.zeros_like(m[k]) for k in colours}
+    expected = {k: getattr(scene, k).detach().double().clone() for k in colours}
+    for step in range(6):
+        before = {k: getattr(opt.scene, k).detach().double().clone() for k in colours}
+        for k in colours:
+            grad = torch.randn(getattr(scene, k).shape, generator=g)
+            grad = grad * torch.tensor([1.0, 0.0, 0.0]) if step < 3 else grad[..., :1].expand_as(grad).clone()
+            getattr(opt.scene, k).grad = grad
+            m[k] = 0.9 * m[k] + 0.1 * grad.double()
+            v[k] = 0.999 * v[k] + 0.001 * grad.double() ** 2
+        assert opt.step()
+        bc1, bc2 = 1 - 0.9 ** (step + 1), 1 - 0.999 ** (step + 1)
+        for k in colours:
+            divisor = (v[k] / bc2).mean(-1, keepdim=True) if shared else v[k] / bc2
+            expected[k] -= lr * (m[k] / bc1) / (divisor.sqrt() + 1e-15)
+            torch.testing.assert_close(getattr(opt.scene, k).detach().double(), expected[k], rtol=1e-5, atol=1e-6)
+    for k in colours:
+        moved = before[k] - getattr(opt.scene, k).detach().double()
+        ratio = moved / m[k]
+        spread = float((ratio - ratio.mean(-1, keepdim=True)).abs().max() / ratio.abs().max())
+        assert bool((ratio > 0).all())
+        assert (spread < 1e-4) if shared else (spread > 0.1), (k, spread)
+
+
 def test_frozen_gaussians_with_momentum_do_not_move():
     opt = GaussianAdam(random_scene(30), dict.fromkeys(PARAM_NAMES, 1e-2))
     g = torch.Generator().manual_seed(2)

@@ -55,6 +55,14 @@ def exponential_decay(step: int, total: int, start: float, end: float) -> float:
     return math.exp((1.0 - t) * math.log(start) + t * math.log(end))
 
 
+def step_scale(second_moment: torch.Tensor, shared: bool) -> torch.Tensor:
+    """Adam's divisor, the root of the (bias-corrected) second moment: per element, or with ``shared`` one per
+    colour, the root of its mean over the last axis (R, G, B). Per element, a step even in R, G and B (lighter or
+    darker) comes out uneven, a hue, wherever the channels' histories differ; shared, each colour's step points
+    where its momentum points."""
+    return (second_moment.mean(-1, keepdim=True) if shared else second_moment).sqrt()
+
+
 def rows_like(mask: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
     """A per-Gaussian (N,) mask reshaped to broadcast against a per-Gaussian tensor (N, ...)."""
     return mask.reshape(-1, *([1] * (t.dim() - 1)))
@@ -106,8 +114,9 @@ class GaussianAdam:
 
     ``trainable`` names the tensors that learn; ``frozen`` (N,) marks Gaussians that never change.
     ``attachments`` are per-Gaussian tensors that are not trained but must follow every structure
-    change (e.g. the geometry-preservation colours). ``scene`` (a copy of the one given) is
-    replaced on structure changes; its tensors are leaves updated in place by :meth:`step`.
+    change (e.g. the geometry-preservation colours). ``shared_channels`` names colour tensors whose R, G
+    and B share one step size (:func:`step_scale`). ``scene`` (a copy of the one given) is replaced on
+    structure changes; its tensors are leaves updated in place by :meth:`step`.
     """
 
     def __init__(
@@ -118,6 +127,7 @@ class GaussianAdam:
         trainable: Iterable[str] = PARAM_NAMES,
         frozen: torch.Tensor | None = None,
         attachments: dict[str, torch.Tensor] | None = None,
+        shared_channels: Iterable[str] = (),
         betas: tuple[float, float] = (0.9, 0.999),
         eps: float = 1e-15,
     ) -> None:
@@ -125,6 +135,7 @@ class GaussianAdam:
         self.lrs = dict(lrs)
         self.betas, self.eps = betas, eps
         self.trainable = _check_names(trainable)
+        self.shared_channels = _check_names(shared_channels)
         self.frozen = (
             torch.zeros(n, dtype=torch.bool, device=scene.device)
             if frozen is None
@@ -189,7 +200,8 @@ class GaussianAdam:
                 grad = torch.zeros_like(param) if param.grad is None else param.grad
                 m = self.exp_avg[name] * b1 + grad * (1.0 - b1)
                 v = self.exp_avg_sq[name] * b2 + grad * grad * (1.0 - b2)
-                update = (m / bc1) / ((v / bc2).sqrt() + self.eps) * (self.lrs[name] * self.guard.lr_scale)
+                scale = step_scale(v / bc2, name in self.shared_channels)
+                update = (m / bc1) / (scale + self.eps) * (self.lrs[name] * self.guard.lr_scale)
                 if any_frozen:
                     keep = rows_like(active, param)
                     m = torch.where(keep, m, self.exp_avg[name])

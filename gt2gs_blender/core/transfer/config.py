@@ -349,9 +349,10 @@ class TransferConfig(SpeedSettings):
     texture_keeps_hue: bool = setting(
         False,
         "Texture Loss Keeps Hue",
-        "The texture loss (and the content loss beside it) may only lighten or darken the splats, so it sharpens the "
-        "texture's pattern without painting hues of its own (pink and green patches on a dark capture); the hues "
-        "come from the laid-out texture and the scene; off: it may change hue too, as the paper's does",
+        "The texture loss (and the content loss beside it) may only lighten or darken the splats, and each splat's "
+        "red, green and blue change by one step size, so it sharpens the texture's pattern without painting hues "
+        "of its own (pink and green patches on a dark capture); the hues come from the laid-out texture and the "
+        "scene; off: it may change hue too, as the paper's does",
         "stylise",
     )
     lambda_content: float = setting(

@@ -180,6 +180,7 @@ class Styliser:
             self._lrs(),
             trainable=self.colors,
             frozen=frozen,
+            shared_channels=self.colors if config.texture_keeps_hue else (),
             attachments={
                 COLOR_ATTACHMENT: scene.base_colors.detach(),
                 RATIO_ATTACHMENT: self._ratio_limits(scene),
