@@ -88,7 +88,9 @@ def test_shared_channels_step_each_colour_where_its_momentum_points(shared):
     scene = random_scene(12)
     colours = ("sh_dc", "sh_rest")
     lr = 1e-2
-    opt = GaussianAdam(scene, dict.fromkeys(PARAM_NAMES, lr), trainable=colours, shared_channels=colours if shared else ())
+    opt = GaussianAdam(
+        scene, dict.fromkeys(PARAM_NAMES, lr), trainable=colours, shared_channels=colours if shared else ()
+    )
     g = torch.Generator().manual_seed(3)
     m = {k: torch.zeros_like(getattr(scene, k), dtype=torch.float64) for k in colours}
     v = {k: torch.zeros_like(m[k]) for k in colours}
