@@ -44,6 +44,8 @@ robot's eyes, sprinkles) moved in colour (Lab a, b; NaN where a scene has none).
 the parts keep their hues apart at the object's scale (1: as in the original, whatever tint the texture gives the
 whole; 0: one hue for all). ``hue_drift`` ("drift") is how far the optimisation moved the hues from the run's start
 (Lab a, b; 0 where its steps only lightened or darkened): patches of a hue neither the texture nor the scene has.
+``own_hue`` ("own") is the part of that drift off the way from the start's hue back to the original's, which the
+layout term allows for free: a hue of the run's own.
 
 Results are saved per (tag, scene, texture, preset, seed) under bench/out/recognise/<tag>/<scene>/ with the
 settings they ran with and the run's stage times, step counts and metrics; ``--reuse`` measures them again
@@ -118,6 +120,7 @@ SUMMED = (
     "accent_shift",
     "part_hues",
     "hue_drift",
+    "own_hue",
     "splats",
 )
 """The row fields a summary averages per scene and variant."""
@@ -260,6 +263,11 @@ def accent_shift(views: Views, original: Views) -> float:
     return float(np.mean(shifts)) if shifts else float("nan")
 
 
+def blurred_ab(rgb: np.ndarray, sigma: float) -> np.ndarray:
+    """Lab (a, b) (H, W, 2) of an RGB uint8 view, blurred by ``sigma`` px: its hue at the scale a patch counts."""
+    return cv2.GaussianBlur(cv2.cvtColor(measure.to_float(rgb), cv2.COLOR_RGB2Lab)[..., 1:], (0, 0), sigma)
+
+
 def hue_drift(views: Views, start: Views, original: Views) -> float:
     """Hue the optimisation painted of its own (the guitar's pink and green patches under woven straw): the mean Lab
     (a, b) distance of each held-out view to the same view of the run's start (the laid-out splats before any
@@ -268,14 +276,25 @@ def hue_drift(views: Views, start: Views, original: Views) -> float:
     surface, not its splats); NaN without a start (the layout off)."""
     drifts = []
     for (rgb, _), (then, _), (_, alpha) in zip(views, start, original, strict=True):
-        mask = alpha > measure.MASK_ALPHA
         sigma = HUE_DRIFT_BLUR * max(alpha.shape)
-        ab, ab_then = (
-            cv2.GaussianBlur(cv2.cvtColor(measure.to_float(x), cv2.COLOR_RGB2Lab)[..., 1:], (0, 0), sigma)
-            for x in (rgb, then)
+        drifts.extend(
+            np.linalg.norm(blurred_ab(rgb, sigma) - blurred_ab(then, sigma), axis=-1)[alpha > measure.MASK_ALPHA]
         )
-        drifts.extend(np.linalg.norm(ab - ab_then, axis=-1)[mask])
     return float(np.mean(drifts)) if drifts else float("nan")
+
+
+def own_hue(views: Views, start: Views, original: Views) -> float:
+    """The part of ``hue_drift`` that is no drift back toward the capture (which the layout term allows for free): the
+    mean Lab (a, b) distance of each held-out view's blurred hue from the segment between its start's and the
+    original's at that pixel, over the original's object pixels; 0 for a result anywhere between the two."""
+    own = []
+    for (rgb, _), (then, _), (first, alpha) in zip(views, start, original, strict=True):
+        sigma = HUE_DRIFT_BLUR * max(alpha.shape)
+        point, a, b = (blurred_ab(x, sigma)[alpha > measure.MASK_ALPHA] for x in (rgb, then, first))
+        step = b - a
+        along = ((point - a) * step).sum(-1) / np.maximum((step * step).sum(-1), np.finfo(np.float32).tiny)
+        own.extend(np.linalg.norm(point - (a + np.clip(along, 0.0, 1.0)[:, None] * step), axis=-1))
+    return float(np.mean(own)) if own else float("nan")
 
 
 def part_hues(views: Views, original: Views) -> float:
@@ -560,7 +579,8 @@ def result_row(
     t["splats"] = len(result_scene)  # what the saved file holds: the split's cost beside its seconds
     t.update(scene_side(views, run.original_views))
     start = started.get(reference)
-    t["hue_drift"] = float("nan") if start is None else hue_drift(views, start, run.original_views)
+    for key, hue in (("hue_drift", hue_drift), ("own_hue", own_hue)):
+        t[key] = float("nan") if start is None else hue(views, start, run.original_views)
     t.update(preview_fields(from_preview(result_stats, previews[reference]), reference, run.starts[preset_name]))
     scale = (
         {m: original_row[f"preview_{m}"] for m in MEASURES}
@@ -741,7 +761,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
         f"\nper scene and variant: textures in the top {TOP} under Gram / Gabor / both (top 1: Gram / Gabor), "
         "scene SSIM (how much of the original scene shows; mean, least), colour specks (share of pixels; mean), "
         "accents (Lab a, b shift of the original's small, vivid features; mean), hues (the parts' hues kept apart, "
-        "1 = as the original; mean), drift (Lab a, b the steps moved the hues from the start; mean)"
+        "1 = as the original; mean), drift (Lab a, b the steps moved the hues from the start; mean), own (the drift "
+        "off the way back to the original's hue; mean)"
     )
     for scene, variants in summary.items():
         for variant, s in variants.items():
@@ -759,7 +780,8 @@ def print_table(rows: list[dict], summary: dict) -> None:
                 f"scene SSIM {s['mean_content_ssim']:.3f}, {s['least_content_ssim']:.3f}   "
                 f"specks {s['mean_colour_specks']:.3f}   accents {s['mean_accent_shift']:.1f}   "
                 f"hues {s.get('mean_part_hues', float('nan')):.2f}   "
-                f"drift {s.get('mean_hue_drift', float('nan')):.2f}{tail}"
+                f"drift {s.get('mean_hue_drift', float('nan')):.2f}   "
+                f"own {s.get('mean_own_hue', float('nan')):.2f}{tail}"
             )
     met = target_met(summary)
     for key, ok in met.items():

@@ -123,6 +123,26 @@ def test_hue_drift_is_the_hue_the_steps_added_over_the_object_and_not_its_light(
     assert recognise.hue_drift([(fine, alpha)], [(start, alpha)], [(start, alpha)]) < 0.1 * drift
 
 
+def test_own_hue_forgives_a_drift_back_toward_the_capture_and_counts_one_off_the_way():
+    """The bench's own hue: a result between its start (amber) and the original (red) at a third of the way, or at the
+    original itself, is 0 (a drift the layout term allows for free) while ``hue_drift`` counts it; a result as far
+    past the start on the other side of the way (green) is its whole distance from the start, as ``hue_drift``'s."""
+    alpha = np.ones((48, 48), np.float32)
+    colours = {"start": (190, 150, 90), "original": (200, 60, 50), "green": (120, 190, 90)}
+    lab = {k: cv2.cvtColor(np.array([[v]], np.float32) / 255.0, cv2.COLOR_RGB2Lab)[0, 0] for k, v in colours.items()}
+    start, original = (np.full((48, 48, 3), colours[k], np.uint8) for k in ("start", "original"))
+    third = cv2.cvtColor((lab["start"] + (lab["original"] - lab["start"]) / 3)[None, None], cv2.COLOR_Lab2RGB)
+    between = np.full((48, 48, 3), np.rint(255.0 * third[0, 0]), np.uint8)  # a third of the way in Lab, not in RGB
+    for result in (between, original):
+        assert recognise.own_hue([(result, alpha)], [(start, alpha)], [(original, alpha)]) < 0.5
+        assert recognise.hue_drift([(result, alpha)], [(start, alpha)], [(original, alpha)]) > 5.0
+    away = lab["start"][1:] - lab["green"][1:]
+    assert float(np.dot(away, lab["original"][1:] - lab["start"][1:])) > 0  # green lies behind the start, off the way
+    green = np.full((48, 48, 3), colours["green"], np.uint8)
+    own = recognise.own_hue([(green, alpha)], [(start, alpha)], [(original, alpha)])
+    assert own == pytest.approx(float(np.linalg.norm(away)), rel=0.01)
+
+
 def test_part_hues_keep_parts_apart_whatever_tint_the_whole_takes():
     """The bench's part-hue measure: a pink and a beige half of like light (icing on dough) kept are 1, and 1 still
     under a tint over the whole; both halves one hue is near 0 (the floor's share alone); the hues swapped is
