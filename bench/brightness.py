@@ -27,8 +27,8 @@ from recognise import texture_path
 from recognise_scenes import SCENES, load_bench_scene
 
 from gt2gs_blender.core.api import GaussianScene, read_scene, render
-from gt2gs_blender.core.transfer.losses import luma
 from gt2gs_blender.core.transfer.texture import load_texture
+from gt2gs_blender.core.transfer.tone import luma
 
 OUT = ROOT / "bench" / "out" / "brightness"
 RESULTS = ROOT / "bench" / "out" / "recognise"

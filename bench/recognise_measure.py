@@ -47,13 +47,13 @@ if str(ROOT) not in sys.path:
 
 from gt2gs_blender.core.features.extractor import build_layers
 from gt2gs_blender.core.features.specs import IMAGENET_MEAN, IMAGENET_STD, FeatureSpec
-from gt2gs_blender.core.transfer import losses
+from gt2gs_blender.core.transfer import tone
 
 SHARED = ROOT.parent / "shared"
 VGG_WEIGHTS = SHARED / "weights" / "vgg16_to_relu2_2.pth"
 CACHE = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "gt2gs_blender" / "bench" / "recognise"
 
-LUMA = np.asarray(losses.LUMA, np.float32)
+LUMA = np.asarray(tone.LUMA, np.float32)
 SHADING_SIGMA = 12.0
 CONTRAST_SIGMA = 12.0
 CONTRAST_FLOOR = 0.02

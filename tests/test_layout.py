@@ -1014,7 +1014,8 @@ def test_layout_loss_charges_a_hue_more_than_the_same_step_in_light_and_dark():
     of d in green alone costs 0.7152 d in luma and 4 x 2 x 0.7152 d in the colour differences, so the
     texture term draws its dark lines dark instead of buying them with one channel (the magenta dots at
     woven straw's crossings)."""
-    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, layout_loss
+    from gt2gs_blender.core.transfer.tone import LUMA
 
     ideal = torch.cat([torch.full((8, 8, 3), 0.5), torch.ones(8, 8, 1)], -1)
     darker = ideal[..., :3] - 0.2
@@ -1028,7 +1029,8 @@ def test_layout_loss_lets_a_hue_drift_back_to_the_scenes_own_for_free():
     """A grey texture over a red scene: a result part of the way to the scene's hue, or at it, at the
     texture's luma, costs nothing; one past it, or the same colour step toward blue, costs HUE_WEIGHT x the L1
     distance of its colour differences (R - Y, B - Y) from the path's nearest point, worked out by hand."""
-    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, layout_loss
+    from gt2gs_blender.core.transfer.tone import LUMA
 
     ideal = torch.cat([torch.full((4, 4, 3), 0.5), torch.ones(4, 4, 1)], -1)
     luma = np.array(LUMA)
@@ -1054,7 +1056,8 @@ def test_layout_loss_stays_finite_where_the_texture_and_the_scene_share_a_hue():
     """Stress: the path of length zero (texture = scene), of a length under float32's smallest normal, and
     a result exactly on the path: the loss and its gradient are finite, and a zero path costs the plain
     distance from the texture's hue."""
-    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, LUMA, layout_loss
+    from gt2gs_blender.core.transfer.losses import HUE_WEIGHT, layout_loss
+    from gt2gs_blender.core.transfer.tone import LUMA
 
     g = torch.Generator().manual_seed(3)
     texture = torch.rand(16, 16, 3, generator=g)

@@ -20,9 +20,9 @@ import recognise_measure as measure
 import recognise_scenes as scenes
 
 from gt2gs_blender.core.cameras.warp import expected_depth
-from gt2gs_blender.core.transfer.losses import LUMA
 from gt2gs_blender.core.transfer.orientation_preview import laid_out_start
 from gt2gs_blender.core.transfer.presets import preset
+from gt2gs_blender.core.transfer.tone import LUMA
 from gt2gs_blender.core.transfer.views import ViewSet
 
 

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from ..scene.parts import srgb_to_lab
-from .losses import luma
+from .tone import luma
 
 VIVID = (10.0, 25.0)
 """Lab chroma: no accent at or below the first (greys, browns, pastels), fully vivid from the second."""

@@ -56,7 +56,6 @@ from .bank import bank_depth_ratio
 from .config import FORWARD_SPREAD_DEG, TransferConfig, keeps_scene
 from .faces import turned_to_faces
 from .grain import periodic_blur
-from .losses import luma
 from .normals import SURFACE_ALPHA, normal_map, surface_normals
 from .setting import Projection
 from .shade import (
@@ -70,6 +69,7 @@ from .shade import (
     under_scene,
 )
 from .texture_bank import bank_scales, screen_rotation
+from .tone import luma
 from .views import ViewSet
 
 BLEND_POWER = 8.0

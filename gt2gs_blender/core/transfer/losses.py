@@ -11,15 +11,8 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
-LUMA = (0.2126, 0.7152, 0.0722)
-"""Rec. 709 luminance weights: light and dark apart from hue (the layout loss, the preview's shading,
-``preview_ssim``)."""
-
-
-def luma(colours: torch.Tensor) -> torch.Tensor:
-    """The luminance (...) of ``colours`` (..., 3) by ``LUMA``: the one conversion every light-and-dark rule uses."""
-    return colours @ torch.tensor(LUMA, dtype=colours.dtype, device=colours.device)
-
+from .hue_path import off_path
+from .tone import chroma, luma
 
 COSINE_EPS = 1e-8
 """Norm floor when normalising feature vectors (a zero vector has cosine 0 with everything)."""
@@ -93,24 +86,8 @@ def layout_loss(image: torch.Tensor, layout: torch.Tensor, scene: torch.Tensor) 
         return image.sum() * 0.0
     result, texture, original = image[covered], layout[..., :3][covered], scene[covered]
     return (
-        luma(result - texture).abs() + HUE_WEIGHT * _off_path(_chroma(result), _chroma(texture), _chroma(original))
+        luma(result - texture).abs() + HUE_WEIGHT * off_path(chroma(result), chroma(texture), chroma(original))
     ).mean()
-
-
-def _chroma(rgb: torch.Tensor) -> torch.Tensor:
-    """(N, 2) colour differences R - Y and B - Y of (N, 3) RGB: its hue and saturation apart from its light."""
-    y = luma(rgb)
-    return torch.stack([rgb[:, 0] - y, rgb[:, 2] - y], -1)
-
-
-def _off_path(point: torch.Tensor, start: torch.Tensor, end: torch.Tensor) -> torch.Tensor:
-    """(N,) L1 distance of each (N, 2) point from the nearest point of the segment start -> end (a segment of
-    length zero is its start)."""
-    step = end - start
-    length2 = (step * step).sum(-1)
-    along = ((point - start) * step).sum(-1) / length2.clamp_min(torch.finfo(point.dtype).tiny)
-    nearest = start + along.clamp(0.0, 1.0)[:, None] * step
-    return (point - nearest).abs().sum(-1)
 
 
 def tv_loss(image: torch.Tensor, *, channels_last: bool = True) -> torch.Tensor:

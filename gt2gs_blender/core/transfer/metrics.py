@@ -3,7 +3,7 @@ measures on every other view (``MEASURE_STRIDE``) at one size, ``MEASURE_SIDE``,
 
 - ``ssim``: the paper's content preservation, SSIM of each stylised render vs the original render over the
   whole frame, mean over views (a small object on a plain backdrop scores high whatever happens to it).
-- ``object_ssim``: content a user can trust, SSIM of the luminance (``losses.luma``) over the windows centred on
+- ``object_ssim``: content a user can trust, SSIM of the luminance (``tone.luma``) over the windows centred on
   the pixels the original covers (the object's pixels; for a capture that fills the view, the frame): whether the
   scene's edges, light and dark are still there, whatever colour the texture gave them (the texture's colour is what
   a run is for); ``object_ssim_blurred`` the same after blurring both renders to the object's scale (``OBJECT_BLUR``):
@@ -39,8 +39,9 @@ from ..features.window import selected_features
 from ..render import render
 from ..scene.gaussians import GaussianScene
 from ..train.ssim import WINDOW, gaussian_window, ssim_map
-from .losses import cosine_distance, luma, nearest_features
+from .losses import cosine_distance, nearest_features
 from .texture_bank import covered_cells
+from .tone import luma
 
 SHORT_RANGE = 1
 LONG_RANGE = 7

@@ -30,12 +30,12 @@ from .accents import ColourShare
 from .config import MAX_DEPTH_RATIO, TransferConfig
 from .detail import add_detail
 from .layout import lay_out, layout_materials, layout_shading, scene_colour_mix
-from .losses import luma
 from .plan import RunPlan, plan_run
 from .region import assemble
 from .shade import kept_scene, shading, under_scene
 from .texture import load_texture
 from .texture_bank import bank_scales, depth_groups, group_depth_ratio, screen_rotation
+from .tone import luma
 
 MIN_ALPHA = 0.05
 """Pixels with less coverage than this show the background only."""

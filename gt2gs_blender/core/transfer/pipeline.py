@@ -45,7 +45,7 @@ from .plan import RunPlan, plan_run
 from .region import assemble, structure_changed
 from .shade import laid_exposure
 from .skips import Plateau
-from .stylise import COLOR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
+from .stylise import COLOR_ATTACHMENT, OWN_COLOUR_ATTACHMENT, Styliser, StyliseStats, ViewTargets, order_and_link
 from .texture_bank import TextureBank, compact_bank
 from .views import ViewSet, render_views, view_targets
 
@@ -173,7 +173,8 @@ def keeps_scene_tones(config: TransferConfig) -> bool:
 class Prepared:
     """What the ``prepare`` stage hands on: the plan, the working scene and rows it restyles, the shade the layout
     keeps, the feature network, each view's targets, what the layout did (None: no layout), the start as the
-    orientation preview shows it (None: not measured) and how many splats there were before the layout split them."""
+    orientation preview shows it (None: not measured), how many splats there were before the layout split them and,
+    for *No New Hues*, each splat's own colour before the layout (None: not kept)."""
 
     plan: RunPlan
     work: GaussianScene
@@ -184,6 +185,7 @@ class Prepared:
     laid_out: dict | None
     start_view: np.ndarray | None
     n_unsplit: int
+    own_colours: torch.Tensor | None = None
 
 
 def _transfer(
@@ -216,7 +218,9 @@ def _transfer(
 
     tracker.begin("stylise")
     frozen = None if prepared.region is None else ~prepared.region
-    carried = None if prepared.shade is None else {SHADE_ATTACHMENT: prepared.shade}
+    carried = {SHADE_ATTACHMENT: prepared.shade} if prepared.shade is not None else {}
+    if prepared.own_colours is not None:
+        carried[OWN_COLOUR_ATTACHMENT] = prepared.own_colours
     work, frozen, stats, attached = stylise(
         prepared.work, plan.used, prepared.targets, matching, extractor, config, tracker, frozen, carried
     )
@@ -260,11 +264,12 @@ def _prepare(plan: RunPlan) -> Prepared:
         autocast=mixed_precision_dtype(plan.device, config.mixed_precision),
     )
     n_work = len(work)
-    laid_out = start_view = None
+    laid_out = start_view = own = None
     exposure = 1.0
     if laying:
         if splits_first(config):
             work, region, shade = split_for_detail(work, region, shade, frame, config)
+        own = work.base_colors.detach().clamp(0.0, 1.0) if config.hue_on_path else None
         work = lay_out(work, region, plan.content, image, frame, config, shade)
         if config.evaluate and not splits_last(config):
             # the run's start as the orientation preview shows it, kept for preview_ssim (no second layout)
@@ -285,7 +290,7 @@ def _prepare(plan: RunPlan) -> Prepared:
             plan.used, image, frame, config.angle, shaded, width, config.keep_scene, mix, exposure, lit, hues
         )
         targets = [replace(t, layout_image=i) for t, i in zip(targets, ideal)]
-    return Prepared(plan, work, region, shade, extractor, targets, laid_out, start_view, n_work)
+    return Prepared(plan, work, region, shade, extractor, targets, laid_out, start_view, n_work, own)
 
 
 def _finish(

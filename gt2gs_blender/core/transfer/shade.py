@@ -34,7 +34,7 @@ import torch.nn.functional as F
 
 from ..scene.gaussians import GaussianScene
 from .accents import ColourShare
-from .losses import luma
+from .tone import luma
 
 ROW = 8
 """A splat's kept-scene row: the texture's gain, the colour added (3), the exposure, the accent's hue (3)."""

@@ -38,12 +38,14 @@ from ..features.extractor import FeatureExtractor
 from ..features.window import plain_features, windowed_features
 from ..render import FixedGeometry, RenderOutput, fix_geometry, render
 from ..scene.gaussians import GaussianScene
+from ..scene.inria import SH_C0
 from ..train.densify import DensifyConfig, DensityStats, densify_and_prune, densify_due
 from ..train.optim import GaussianAdam, LearningRates
 from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
 from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig, splits_first
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
+from .hue_path import onto_hue_path
 from .losses import anisotropy, content_loss, cosine_distance, layout_loss, light_only, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
 
@@ -57,6 +59,9 @@ REUSE_BUDGET = 1 << 30
 beyond it are redrawn from fresh weights every step (still cheaper than a full render's backward)."""
 RATIO_ATTACHMENT = "ratio_limit"
 """Per Gaussian, the scale ratio the correction phases tolerate (children inherit their parent's)."""
+OWN_COLOUR_ATTACHMENT = "own_colour"
+"""Per Gaussian, its colour in the capture before the layout (children inherit their parent's): where *No New Hues*
+lets its hue go back to."""
 
 
 @dataclass
@@ -256,6 +261,8 @@ class Styliser:
         if densify:
             self.stats.add(out.footprints, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
         self._step(loss)
+        if cfg.hue_on_path and OWN_COLOUR_ATTACHMENT in self.opt.attachments:
+            self._hue_back_on_path()
         if self.report.moved_splats:
             self._geometry_moved()
         self.cursor = (self.cursor + 1) % len(self.order)
@@ -377,6 +384,18 @@ class Styliser:
     def _unknown_angles(view: ViewTargets) -> torch.Tensor:
         """No prior angle anywhere in ``view`` (NaN per cell, on the view's device)."""
         return torch.full(view.mask.shape, math.nan, device=view.mask.device)
+
+    @torch.no_grad()
+    def _hue_back_on_path(self) -> None:
+        """*No New Hues*: every restyled splat's DC colour keeps its light, its hue put back on the way from its
+        laid-out start's (``COLOR_ATTACHMENT``) to its own in the capture (``OWN_COLOUR_ATTACHMENT``)."""
+        rows = ~self.opt.frozen
+        attached = self.opt.attachments
+        dc = self.scene.sh_dc
+        colours = onto_hue_path(
+            self.scene.base_colors[rows], attached[COLOR_ATTACHMENT][rows], attached[OWN_COLOUR_ATTACHMENT][rows]
+        )
+        dc[rows] = ((colours - 0.5) / SH_C0).to(dc)
 
     # -- correct (Geometry Preservation Branch) ---------------------------------------------------
     def correct_step(self) -> float:
