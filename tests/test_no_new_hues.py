@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from gt2gs_blender.core.transfer.hue_path import off_path, onto_hue_path
+from gt2gs_blender.core.transfer.hue_path import along_hue_path, off_path, onto_hue_path
 from gt2gs_blender.core.transfer.tone import chroma, luma
 
 from .test_layout import front_camera, wall_config
@@ -60,3 +60,28 @@ def test_no_new_hues_keeps_every_splat_s_hue_between_its_start_and_its_own(share
         assert float(off.max()) < 1e-5
     else:
         assert float(off.max()) > 1e-3
+
+
+def test_along_hue_path_keeps_only_even_pushes_and_moves_along_the_way():
+    """Analytic: an even push (1, 1, 1) and a push along the way pass unchanged; a push across the way is taken out;
+    at the way's start a push that would step back past it loses its move along the way; on a way of length zero only
+    the even part is left. A plain step with what is left, from a colour on the way, stays on it."""
+    start = torch.tensor([[0.6, 0.4, 0.4]])
+    own = torch.tensor([[0.4, 0.4, 0.6]])
+    middle = 0.5 * (start + own)
+    even = torch.ones(1, 3)
+    assert torch.allclose(along_hue_path(even, middle, start, own), even, atol=1e-6)
+    way = own - start  # (-0.2, 0, 0.2): sums to zero, so its chroma is the way and its light stays
+    assert torch.allclose(along_hue_path(way, middle, start, own), way, atol=1e-6)
+    across = torch.cross(even, way, dim=-1)  # orthogonal to both: off the way
+    assert torch.allclose(along_hue_path(across, middle, start, own), torch.zeros(1, 3), atol=1e-6)
+    back_past_start = along_hue_path(way + even, start, start, own)  # descent -grad leads from start away from own
+    assert torch.allclose(back_past_start, even, atol=1e-6)
+    assert torch.allclose(along_hue_path(-way + even, start, start, own), -way + even, atol=1e-6)
+    assert torch.allclose(along_hue_path(way + across + even, middle, start, start), even, atol=1e-6)
+    generator = torch.Generator().manual_seed(0)
+    grad = torch.randn(64, 3, generator=generator)
+    starts, owns = torch.rand(64, 3, generator=generator), torch.rand(64, 3, generator=generator)
+    on_way = onto_hue_path(torch.rand(64, 3, generator=generator), starts, owns)
+    stepped = on_way - 1e-3 * along_hue_path(grad, on_way, starts, owns)
+    assert float(off_path(chroma(stepped), chroma(starts), chroma(owns)).max()) < 1e-5

@@ -358,9 +358,9 @@ class TransferConfig(SpeedSettings):
     hue_on_path: bool = setting(
         False,
         "No New Hues",
-        "After every step each splat keeps the light and dark the run gave it, and its hue is put back between the "
-        "laid-out texture's and the capture's own, so the run paints no hue that neither has (pink and green "
-        "patches on a dark capture); needs Lay Out Texture",
+        "The run may lighten and darken each splat but move its hue only between the laid-out texture's and the "
+        "capture's own, so it paints no hue that neither has (pink and green patches on a dark capture); needs "
+        "Lay Out Texture",
         "stylise",
     )
     lambda_content: float = setting(

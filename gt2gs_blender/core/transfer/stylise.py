@@ -45,7 +45,7 @@ from ..train.reconstruction import reconstruction_loss
 from .afcm import AFCMWeights, afcm_weight, depth_level, high_frequency_energy, normalise_frequency
 from .config import FORWARD_SPREAD_DEG, PRUNE_SCREEN_RADIUS, PRUNE_WORLD_SCALE, TransferConfig, splits_first
 from .gt2 import PriorLink, distortion, match_with_prior, prior_link, view_order
-from .hue_path import onto_hue_path
+from .hue_path import along_hue_path, onto_hue_path
 from .losses import anisotropy, content_loss, cosine_distance, layout_loss, light_only, scale_regulariser, tv_loss
 from .texture_bank import TextureBank
 
@@ -185,7 +185,7 @@ class Styliser:
             self._lrs(),
             trainable=self.colors,
             frozen=frozen,
-            shared_channels=self.colors if config.texture_keeps_hue else (),
+            shared_channels=self.colors if config.texture_keeps_hue or config.hue_on_path else (),
             attachments={
                 COLOR_ATTACHMENT: scene.base_colors.detach(),
                 RATIO_ATTACHMENT: self._ratio_limits(scene),
@@ -260,8 +260,11 @@ class Styliser:
         loss.backward()
         if densify:
             self.stats.add(out.footprints, view.camera.width, view.camera.height, self.scene.sh_dc.grad)
+        hue_on_path = cfg.hue_on_path and OWN_COLOUR_ATTACHMENT in self.opt.attachments
+        if hue_on_path:
+            self._push_along_hue_path()
         self._step(loss)
-        if cfg.hue_on_path and OWN_COLOUR_ATTACHMENT in self.opt.attachments:
+        if hue_on_path:
             self._hue_back_on_path()
         if self.report.moved_splats:
             self._geometry_moved()
@@ -384,6 +387,22 @@ class Styliser:
     def _unknown_angles(view: ViewTargets) -> torch.Tensor:
         """No prior angle anywhere in ``view`` (NaN per cell, on the view's device)."""
         return torch.full(view.mask.shape, math.nan, device=view.mask.device)
+
+    @torch.no_grad()
+    def _push_along_hue_path(self) -> None:
+        """*No New Hues*: every restyled splat's DC colour gradient keeps only what lightens, darkens or moves its hue
+        along its way (``hue_path.along_hue_path``), so Adam's moments never hold a push that would be undone."""
+        grad = self.scene.sh_dc.grad
+        if grad is None:
+            return
+        rows = ~self.opt.frozen
+        attached = self.opt.attachments
+        grad[rows] = along_hue_path(
+            grad[rows],
+            self.scene.base_colors[rows],
+            attached[COLOR_ATTACHMENT][rows],
+            attached[OWN_COLOUR_ATTACHMENT][rows],
+        )
 
     @torch.no_grad()
     def _hue_back_on_path(self) -> None:

@@ -19,3 +19,10 @@ def chroma(rgb: torch.Tensor) -> torch.Tensor:
     """(N, 2) colour differences R - Y and B - Y of (N, 3) RGB: its hue and saturation apart from its light."""
     y = luma(rgb)
     return torch.stack([rgb[:, 0] - y, rgb[:, 2] - y], -1)
+
+
+def from_light_and_chroma(y: torch.Tensor, differences: torch.Tensor) -> torch.Tensor:
+    """(N, 3) RGB of luma ``y`` (N,) and colour differences ``differences`` (N, 2): :func:`chroma`'s inverse."""
+    red, blue = y + differences[:, 0], y + differences[:, 1]
+    green = (y - LUMA[0] * red - LUMA[2] * blue) / LUMA[1]
+    return torch.stack([red, green, blue], -1)
